@@ -1,0 +1,245 @@
+"""PRSM geometry and materials as validated, frozen dataclasses (SI units throughout).
+
+Symbols follow the papers: screw (s), roller (r), nut (n); flank (contact) angle beta, helix
+angles lambda. Derived quantities are properties, so a geometry cannot hold inconsistent copies.
+The geometric conventions that the papers leave open are written down in docs/physics.md.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, field, fields
+
+from prsm_health.physics.errors import ParameterError
+
+
+def require(ok: bool, name: str, message: str) -> None:
+    """Raise :class:`ParameterError` naming ``name`` unless ``ok``."""
+    if not ok:
+        raise ParameterError(name, message)
+
+
+def require_finite_positive(obj: object, prefix: str) -> None:
+    """Every ``float`` field of the frozen dataclass ``obj`` must be a finite number > 0.
+
+    Integers are accepted and stored as floats; anything else (a string from a data file, a
+    bool) is refused with the field's name.
+    """
+    for f in fields(obj):  # type: ignore[arg-type]
+        if f.type not in (float, "float"):
+            continue
+        value = getattr(obj, f.name)
+        name = f"{prefix}.{f.name}"
+        require(
+            isinstance(value, int | float) and not isinstance(value, bool),
+            name,
+            f"must be a number, got {value!r}",
+        )
+        require(
+            math.isfinite(value) and value > 0.0, name, f"must be finite and > 0, got {value!r}"
+        )
+        object.__setattr__(obj, f.name, float(value))
+
+
+@dataclass(frozen=True, kw_only=True)
+class Material:
+    """Linear-elastic material with the hardness used by wear and fractal contact.
+
+    Defaults are GCr15 bearing steel (papers 001 Table 1, 004 Table 1): E = 212 GPa, nu = 0.29,
+    HRC 60 (about 697 HV, so H = 6.84 GPa), yield strength 1.7 GPa (paper 002, section 3.2).
+    """
+
+    youngs_modulus_pa: float = 2.12e11
+    poisson_ratio: float = 0.29
+    hardness_pa: float = 6.84e9
+    yield_strength_pa: float = 1.7e9
+
+    def __post_init__(self) -> None:
+        require_finite_positive(self, "material")
+        require(self.poisson_ratio < 0.5, "material.poisson_ratio", "must be < 0.5")
+
+    @property
+    def compliance_per_pa(self) -> float:
+        """(1 - nu^2) / E, this body's share of the Hertz contact compliance."""
+        return (1.0 - self.poisson_ratio**2) / self.youngs_modulus_pa
+
+    @property
+    def shear_modulus_pa(self) -> float:
+        """G = E / (2 (1 + nu))."""
+        return self.youngs_modulus_pa / (2.0 * (1.0 + self.poisson_ratio))
+
+
+@dataclass(frozen=True, kw_only=True)
+class Geometry:
+    """Nominal geometry of a standard PRSM (screw, N rollers, nut; rollers single-start).
+
+    Radii are nominal (pitch) radii. ``thread_half_thickness_*_m`` are half tooth thicknesses
+    at the nominal radius (paper 004 Table 2 "c"); they only set the unloaded axial clearance.
+    """
+
+    screw_radius_m: float
+    roller_radius_m: float
+    nut_radius_m: float
+    nut_outer_radius_m: float
+    pitch_m: float
+    screw_starts: int
+    nut_starts: int
+    flank_angle_rad: float
+    n_rollers: int
+    n_threads: int
+    thread_half_thickness_screw_m: float
+    thread_half_thickness_roller_m: float
+    thread_half_thickness_nut_m: float
+    screw_root_radius_m: float
+    screw_crest_radius_m: float
+    roller_root_radius_m: float
+    roller_crest_radius_m: float
+    screw: Material = field(default_factory=Material)
+    roller: Material = field(default_factory=Material)
+    nut: Material = field(default_factory=Material)
+
+    def __post_init__(self) -> None:
+        require_finite_positive(self, "geometry")
+        for name in ("screw_starts", "nut_starts", "n_rollers", "n_threads"):
+            value = getattr(self, name)
+            require(
+                isinstance(value, int) and value >= 1,
+                f"geometry.{name}",
+                f"must be an integer >= 1, got {value!r}",
+            )
+        require(
+            self.flank_angle_rad < math.pi / 2,
+            "geometry.flank_angle_rad",
+            f"must be in (0, pi/2), got {self.flank_angle_rad!r}",
+        )
+        require(
+            self.roller_radius_m < self.screw_radius_m,
+            "geometry.roller_radius_m",
+            f"roller ({self.roller_radius_m} m) must be smaller than the screw "
+            f"({self.screw_radius_m} m)",
+        )
+        require(
+            self.nut_radius_m > self.screw_radius_m + self.roller_radius_m,
+            "geometry.nut_radius_m",
+            "must exceed screw_radius_m + roller_radius_m (rollers sit between screw and nut)",
+        )
+        require(
+            self.nut_outer_radius_m > self.nut_radius_m,
+            "geometry.nut_outer_radius_m",
+            "must exceed nut_radius_m",
+        )
+        require(
+            self.n_rollers == 1
+            or math.sin(math.pi / self.n_rollers) * self.carrier_radius_m > self.roller_radius_m,
+            "geometry.n_rollers",
+            f"{self.n_rollers} rollers of radius {self.roller_radius_m} m overlap on the carrier "
+            f"circle of radius {self.carrier_radius_m} m",
+        )
+        require(
+            self.screw_root_radius_m < self.screw_radius_m < self.screw_crest_radius_m,
+            "geometry.screw_radius_m",
+            "must lie between screw_root_radius_m and screw_crest_radius_m",
+        )
+        require(
+            self.roller_root_radius_m < self.roller_radius_m < self.roller_crest_radius_m,
+            "geometry.roller_radius_m",
+            "must lie between roller_root_radius_m and roller_crest_radius_m",
+        )
+        require(
+            self.thread_half_thickness_screw_m + self.thread_half_thickness_roller_m
+            < self.pitch_m / 2,
+            "geometry.thread_half_thickness_screw_m",
+            "screw and roller teeth (2c_s + 2c_r) must fit in one pitch",
+        )
+
+    # --- derived quantities -------------------------------------------------------------
+    @property
+    def carrier_radius_m(self) -> float:
+        """Distance from the screw axis to a roller axis, r_s + r_r."""
+        return self.screw_radius_m + self.roller_radius_m
+
+    @property
+    def lead_m(self) -> float:
+        """Screw lead L = n_s p (paper 002 eq. 19 uses the lead)."""
+        return self.screw_starts * self.pitch_m
+
+    @property
+    def screw_helix_angle_rad(self) -> float:
+        """lambda_s = atan(n_s p / (2 pi r_s)) (paper 004, section 2.2)."""
+        return math.atan(self.lead_m / (2.0 * math.pi * self.screw_radius_m))
+
+    @property
+    def roller_helix_angle_rad(self) -> float:
+        """lambda_r = atan(p / (2 pi r_r)) (paper 004, section 2.2)."""
+        return math.atan(self.pitch_m / (2.0 * math.pi * self.roller_radius_m))
+
+    @property
+    def effective_ball_radius_m(self) -> float:
+        """R = r_r / sin(beta): radius of the roller's arc flank profile (paper 004 eq. 25)."""
+        return self.roller_radius_m / math.sin(self.flank_angle_rad)
+
+    @property
+    def axial_projection(self) -> float:
+        """sin(beta) cos(lambda): axial component of a unit normal contact force (004 eq. 18)."""
+        return math.sin(self.flank_angle_rad) * math.cos(self.roller_helix_angle_rad)
+
+    @property
+    def radial_projection(self) -> float:
+        """cos(beta): radial component of a unit normal contact force (paper 000 eq. 9, 12)."""
+        return math.cos(self.flank_angle_rad)
+
+    @property
+    def screw_area_m2(self) -> float:
+        """Nominal screw cross-section A_s = pi r_s^2 (paper 004 eq. 16)."""
+        return math.pi * self.screw_radius_m**2
+
+    @property
+    def roller_area_m2(self) -> float:
+        """Nominal roller cross-section A_r = pi r_r^2 (paper 004 eq. 16)."""
+        return math.pi * self.roller_radius_m**2
+
+    @property
+    def nut_area_m2(self) -> float:
+        """Nut cross-section A_N = pi (R_N1^2 - R_N2^2) (paper 000, after eq. 17)."""
+        return math.pi * (self.nut_outer_radius_m**2 - self.nut_radius_m**2)
+
+    @property
+    def roller_angles_rad(self) -> tuple[float, ...]:
+        """Nominal position angles tau_i = 2 pi (i - 1) / N of the rollers (paper 004 eq. 4)."""
+        return tuple(2.0 * math.pi * i / self.n_rollers for i in range(self.n_rollers))
+
+
+@dataclass(frozen=True, kw_only=True)
+class Misalignment:
+    """Screw misalignment of paper 004 Table 3: tilt angles about x and y, and an offset."""
+
+    tilt_x_rad: float = 0.0
+    tilt_y_rad: float = 0.0
+    offset_x_m: float = 0.0
+    offset_y_m: float = 0.0
+
+    def __post_init__(self) -> None:
+        limit = math.radians(1.0)
+        for f in fields(self):
+            value = getattr(self, f.name)
+            require(math.isfinite(value), f"misalignment.{f.name}", f"not finite: {value!r}")
+        for name in ("tilt_x_rad", "tilt_y_rad"):
+            value = getattr(self, name)
+            require(
+                abs(value) <= limit,
+                f"misalignment.{name}",
+                f"|{value!r}| rad exceeds the small-angle model limit of 1 degree",
+            )
+
+    @property
+    def is_aligned(self) -> bool:
+        """True when there is neither tilt nor offset (the radial/misalignment terms drop)."""
+        return not any(getattr(self, f.name) for f in fields(self))
+
+    @classmethod
+    def from_arcmin(cls, tilt_x_arcmin: float, tilt_y_arcmin: float) -> Misalignment:
+        """Build from tilt angles in arc minutes (the papers' unit)."""
+        return cls(
+            tilt_x_rad=math.radians(tilt_x_arcmin / 60.0),
+            tilt_y_rad=math.radians(tilt_y_arcmin / 60.0),
+        )

@@ -1,0 +1,74 @@
+"""Model parameters beyond geometry: friction/lubrication, wear and fatigue (SI units).
+
+Each dataclass is validated at construction (finite, positive, in range) and names the bad
+field in its error. Defaults are the documented standard values of docs/physics.md; presets
+override them from their paper's tables.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+from prsm_health.physics.geometry import require, require_finite_positive
+
+
+@dataclass(frozen=True, kw_only=True)
+class FrictionParameters:
+    """Friction torque model of paper 002 (eq. 2-14) and its lubricant.
+
+    hysteresis_loss_coefficient: gamma of eq. 2 (002 Table 1 "energy loss coefficient" 0.008).
+    sliding_friction_coefficient: f_s of eq. 3, 4, 15 (lubricated steel; 002 uses 0.2 dry in FE).
+    lubricant_viscosity_pa_s: eta_0 of eq. 8 (ISO VG 46 mineral oil near 40 C).
+    pressure_viscosity_coefficient_per_pa: alpha_p of eq. 7.
+    """
+
+    hysteresis_loss_coefficient: float = 0.008
+    sliding_friction_coefficient: float = 0.1
+    lubricant_viscosity_pa_s: float = 0.04
+    pressure_viscosity_coefficient_per_pa: float = 2.2e-8
+
+    def __post_init__(self) -> None:
+        require_finite_positive(self, "friction")
+        require(
+            self.sliding_friction_coefficient < 1.0,
+            "friction.sliding_friction_coefficient",
+            "must be < 1",
+        )
+
+
+@dataclass(frozen=True, kw_only=True)
+class WearParameters:
+    """Wear of the screw-roller flanks: modified Archard (paper 004) or fractal (paper 001).
+
+    archard_coefficient: K of 004 section 2.7 (3.3e-7).
+    adhesive_wear_coefficient: K_w of 001 eq. 32 (1.69e-11, 001 section 3).
+    surface_roughness_ra_m: Ra of 001 eq. 4-5 (Ra 0.3 um in 001 Table 2).
+    sample_length_m: L of 001 Table 2 (500 um).
+    """
+
+    archard_coefficient: float = 3.3e-7
+    adhesive_wear_coefficient: float = 1.69e-11
+    surface_roughness_ra_m: float = 0.3e-6
+    sample_length_m: float = 500e-6
+
+    def __post_init__(self) -> None:
+        require_finite_positive(self, "wear")
+
+
+@dataclass(frozen=True, kw_only=True)
+class FatigueParameters:
+    """Stress-life fatigue of paper 000 eq. 29: N_s = k_alpha^m_s N_0.
+
+    reference_cycles: N_0 (000 section 5: 2.5e8).
+    stress_exponent: m_s (000 section 5: 6).
+    reference_pressure_pa: the Hertz maximum pressure at which a contact survives N_0 cycles;
+    the stress ratio is k_alpha = reference_pressure_pa / p_max (our definition, which 000
+    leaves open; see docs/physics.md).
+    """
+
+    reference_cycles: float = 2.5e8
+    stress_exponent: float = 6.0
+    reference_pressure_pa: float = 2.5e9
+
+    def __post_init__(self) -> None:
+        require_finite_positive(self, "fatigue")

@@ -1,0 +1,85 @@
+"""Presets load and cite their papers; impossible geometry is refused naming the field."""
+
+from __future__ import annotations
+
+import dataclasses
+import math
+from pathlib import Path
+
+import pytest
+
+from prsm_health.physics.errors import ParameterError
+from prsm_health.physics.geometry import Material, Misalignment
+from prsm_health.physics.presets import PRESET_NAMES, load_preset, load_preset_file
+
+
+@pytest.mark.parametrize("name", PRESET_NAMES)
+def test_presets_load_and_cite_source(name: str) -> None:
+    preset = load_preset(name)
+    assert preset.name == name
+    assert "Table" in preset.source
+    assert preset.geometry.n_rollers == 10
+
+
+def test_004_helix_angles_match_table_2() -> None:
+    geometry = load_preset("meng2022-misalignment").geometry
+    assert geometry.screw_helix_angle_rad == pytest.approx(0.1504, abs=5e-5)
+    assert geometry.roller_helix_angle_rad == pytest.approx(0.0907, abs=5e-5)
+
+
+@pytest.mark.parametrize(
+    ("field", "value"),
+    [
+        ("roller_radius_m", 20e-3),
+        ("pitch_m", 0.0),
+        ("pitch_m", -1e-3),
+        ("n_rollers", 30),
+        ("flank_angle_rad", 2.0),
+        ("nut_radius_m", 12e-3),
+        ("screw_starts", 0),
+        ("pitch_m", math.nan),
+    ],
+)
+def test_impossible_geometry_is_refused_naming_the_field(field: str, value: float) -> None:
+    geometry = load_preset("meng2022-misalignment").geometry
+    with pytest.raises(ParameterError) as info:
+        dataclasses.replace(geometry, **{field: value})
+    assert info.value.field.startswith("geometry.")
+    assert field in str(info.value) or info.value.field != ""
+
+
+def test_roller_larger_than_screw_names_roller_radius() -> None:
+    geometry = load_preset("dong2022-downhole").geometry
+    with pytest.raises(ParameterError, match="geometry.roller_radius_m"):
+        dataclasses.replace(geometry, roller_radius_m=16e-3)
+
+
+def test_material_refuses_text_and_bad_poisson() -> None:
+    with pytest.raises(ParameterError, match="material.youngs_modulus_pa"):
+        Material(youngs_modulus_pa="2.12e11")  # type: ignore[arg-type]
+    with pytest.raises(ParameterError, match="material.poisson_ratio"):
+        Material(poisson_ratio=0.6)
+
+
+def test_misalignment_limits_and_units() -> None:
+    tilt = Misalignment.from_arcmin(1.0, 0.0)
+    assert tilt.tilt_x_rad == pytest.approx(math.radians(1 / 60))
+    assert not tilt.is_aligned and Misalignment().is_aligned
+    with pytest.raises(ParameterError, match="misalignment.tilt_y_rad"):
+        Misalignment(tilt_y_rad=0.1)
+
+
+def test_user_preset_file_in_scientific_notation(tmp_path: Path) -> None:
+    bundled = Path(__file__).parents[2] / "prsm_health/physics/presets/meng2022-misalignment.yaml"
+    text = bundled.read_text().replace("pitch_m: 2.0e-3", "pitch_m: 2e-3")
+    path = tmp_path / "mine.yaml"
+    path.write_text(text)
+    assert load_preset_file(path).geometry.pitch_m == pytest.approx(2e-3)
+    path.write_text(text.replace("pitch_m: 2e-3", "pitch_m: two"))
+    with pytest.raises(ParameterError, match="geometry.pitch_m"):
+        load_preset_file(path)
+
+
+def test_unknown_preset_lists_the_choices() -> None:
+    with pytest.raises(ParameterError, match="dong2022-downhole"):
+        load_preset("nope")
