@@ -1,0 +1,75 @@
+# prsm_health: reproducible environment, lint, tests and demo.
+# `make venv` builds everything from scratch on a fresh clone (see shared/ROS_PIP.md).
+
+SHELL := /bin/bash
+.SHELLFLAGS := -euo pipefail -c
+
+PYTHON ?= python3.11
+VENV := $(CURDIR)/.venv
+BUILD := $(CURDIR)/build
+PY := $(VENV)/bin/python
+MSGS := msg_defs/prsm_health_msgs
+# Limit for the whole pytest run, in seconds (per-test limits: pytest-timeout, pyproject.toml).
+TEST_RUN_TIMEOUT ?= 840
+
+# DDS hard rules: loopback only, no shared-memory transport, logs inside the build tree.
+# ROS_DOMAIN_ID is chosen per test process by test/conftest.py, and by the demo target below.
+export ROS_AUTOMATIC_DISCOVERY_RANGE := LOCALHOST
+export FASTDDS_BUILTIN_TRANSPORTS := UDPv4
+export ROS_LOG_DIR := $(BUILD)/ros_log
+
+# Stamps live inside the venv, so deleting .venv also forgets what was built into it.
+REQS_STAMP := $(VENV)/.stamp-requirements
+MSGS_STAMP := $(VENV)/.stamp-msgs
+EDITABLE_STAMP := $(VENV)/.stamp-editable
+
+.PHONY: venv lint test demo clean
+
+venv: $(MSGS_STAMP) $(EDITABLE_STAMP)
+
+$(PY):
+	$(PYTHON) -m venv $(VENV)
+	touch $(VENV)/COLCON_IGNORE
+
+# Install the pinned wheels, then point the wheels' exported CMake files at this venv's
+# Python and numpy headers (they name the wheel build container's paths).
+$(REQS_STAMP): requirements.txt | $(PY)
+	$(PY) -m pip install --quiet -r requirements.txt
+	pyinc=$$($(PY) -c 'import sysconfig; print(sysconfig.get_paths()["include"])'); \
+	npinc=$$($(PY) -c 'import numpy; print(numpy.get_include())'); \
+	grep -rlZ --include='*.cmake' /opt/python/cp311-cp311 $(VENV)/share \
+	  | xargs -0 -r sed -i \
+	    -e "s|/opt/python/cp311-cp311/include/python3.11|$$pyinc|g" \
+	    -e "s|/opt/python/cp311-cp311/lib/python3.11/site-packages/numpy/_core/include|$$npinc|g"
+	touch $@
+
+# Build the interface package with plain cmake and install it into the venv prefix.
+$(MSGS_STAMP): $(REQS_STAMP) $(MSGS)/CMakeLists.txt $(MSGS)/package.xml $(wildcard $(MSGS)/msg/*.msg)
+	rm -rf $(BUILD)/msgs
+	mkdir -p $(BUILD)
+	touch $(BUILD)/COLCON_IGNORE
+	AMENT_PREFIX_PATH=$(VENV) cmake -S $(MSGS) -B $(BUILD)/msgs -DCMAKE_PREFIX_PATH=$(VENV) \
+	  -DCMAKE_INSTALL_PREFIX=$(VENV) -DPython3_EXECUTABLE=$(PY) -DBUILD_TESTING=OFF > /dev/null
+	cmake --build $(BUILD)/msgs -j 2 > /dev/null
+	cmake --install $(BUILD)/msgs > /dev/null
+	touch $@
+
+# --no-build-isolation: build with the pinned setuptools from requirements.txt.
+$(EDITABLE_STAMP): $(REQS_STAMP) setup.py setup.cfg package.xml
+	$(PY) -m pip install --quiet --no-deps --no-build-isolation -e .
+	touch $@
+
+lint: venv
+	$(VENV)/bin/ruff check .
+	$(VENV)/bin/mypy --strict prsm_health
+
+test: venv lint
+	timeout -k 30 $(TEST_RUN_TIMEOUT) $(VENV)/bin/pytest
+
+demo: export ROS_DOMAIN_ID ?= 42
+demo: venv
+	$(VENV)/bin/prsm-health demo
+
+clean:
+	rm -rf $(VENV) $(BUILD) install log .pytest_cache .mypy_cache .ruff_cache *.egg-info
+	find . -name __pycache__ -type d -prune -exec rm -rf {} +
