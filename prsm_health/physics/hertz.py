@@ -49,9 +49,7 @@ def ellipticity(curvature_difference: float) -> float:
     if curvature_difference < 0.75e-6:
         return 1.0 + curvature_difference / 0.75  # the series branch of _curvature_difference
     # F(kappa) rises monotonically from 0 at kappa = 1 towards 1 as kappa -> infinity.
-    return float(
-        brentq(lambda k: _curvature_difference(k) - curvature_difference, 1.0 + 1e-6, 1e4)
-    )
+    return float(brentq(lambda k: _curvature_difference(k) - curvature_difference, 1.0 + 1e-6, 1e4))
 
 
 @dataclass(frozen=True)
@@ -95,12 +93,12 @@ class ContactPair:
     def approach_m(self, normal_load_n: ArrayLike) -> FloatArray:
         """Normal approach delta = K_h Q^(2/3)."""
         load = np.maximum(np.asarray(normal_load_n, dtype=float), 0.0)
-        return self.deflection_constant * np.cbrt(load) ** 2
+        return np.asarray(self.deflection_constant * np.cbrt(load) ** 2, dtype=np.float64)
 
     def load_n(self, approach_m: ArrayLike) -> FloatArray:
         """Normal load Q = (max(delta, 0) / K_h)^(3/2): smooth through loss of contact."""
         approach = np.maximum(np.asarray(approach_m, dtype=float), 0.0)
-        return (approach / self.deflection_constant) ** 1.5
+        return np.asarray((approach / self.deflection_constant) ** 1.5, dtype=np.float64)
 
     def max_pressure_pa(self, normal_load_n: ArrayLike) -> FloatArray:
         """p_max = 3 Q / (2 pi a b); 0 where the contact is unloaded."""

@@ -89,9 +89,7 @@ class _ChainMatrices:
 
 
 @cache
-def _chain_matrices(
-    geometry: Geometry, case: LoadingCase, elastic_errors: bool
-) -> _ChainMatrices:
+def _chain_matrices(geometry: Geometry, case: LoadingCase, elastic_errors: bool) -> _ChainMatrices:
     """Influence matrices of the chain (node displacements from cumulative segment forces).
 
     With the thread index j from the loaded end, the screw node displacement relative to
@@ -111,9 +109,17 @@ def _chain_matrices(
         screw_compliance += (
             share
             * geometry.lead_m**2
-            / (4.0 * math.pi**2 * TORSION_EFFICIENCY * geometry.screw.shear_modulus_pa * polar_moment)
+            / (
+                4.0
+                * math.pi**2
+                * TORSION_EFFICIENCY
+                * geometry.screw.shear_modulus_pa
+                * polar_moment
+            )
         )
-    roller_compliance = geometry.pitch_m / (geometry.roller.youngs_modulus_pa * geometry.roller_area_m2)
+    roller_compliance = geometry.pitch_m / (
+        geometry.roller.youngs_modulus_pa * geometry.roller_area_m2
+    )
     nut_compliance = share / (geometry.nut.youngs_modulus_pa * geometry.nut_area_m2)
     c = geometry.axial_projection
     return _ChainMatrices(
@@ -139,7 +145,7 @@ def _clearance(value: ArrayLike | None, geometry: Geometry, name: str) -> FloatA
     array = np.asarray(value, dtype=float)
     if array.shape != shape or not np.all(np.isfinite(array)):
         raise ParameterError(name, f"must be a finite array of shape {shape}, got {array.shape}")
-    return array - array.min()
+    return np.asarray(array - array.min(), dtype=np.float64)
 
 
 def radial_capacity_ratio(geometry: Geometry) -> float:
@@ -308,7 +314,8 @@ def _newton(
     def norm(parts: tuple[FloatArray, FloatArray, FloatArray, FloatArray]) -> FloatArray:
         r_s, r_n, r_eq, r_glob = parts
         kin = np.maximum(np.abs(r_s).max(axis=(1, 2)), np.abs(r_n).max(axis=(1, 2))) * c
-        return np.maximum(np.maximum(kin / delta_ref, np.abs(r_eq).max(axis=1)), np.abs(r_glob).max(axis=1))
+        worst = np.maximum(kin / delta_ref, np.abs(r_eq).max(axis=1))
+        return np.asarray(np.maximum(worst, np.abs(r_glob).max(axis=1)), dtype=np.float64)
 
     # Initial guess: uniform loads; offsets that zero the mean compatibility residual.
     d_s = np.broadcast_to((k_sr * q_ref ** (2.0 / 3.0))[:, None, None], (batch, rollers, z)).copy()

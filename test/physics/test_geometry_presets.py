@@ -50,14 +50,14 @@ def test_impossible_geometry_is_refused_naming_the_field(field: str, value: floa
 
 def test_roller_larger_than_screw_names_roller_radius() -> None:
     geometry = load_preset("dong2022-downhole").geometry
-    with pytest.raises(ParameterError, match="geometry.roller_radius_m"):
+    with pytest.raises(ParameterError, match=r"geometry\.roller_radius_m"):
         dataclasses.replace(geometry, roller_radius_m=16e-3)
 
 
 def test_material_refuses_text_and_bad_poisson() -> None:
-    with pytest.raises(ParameterError, match="material.youngs_modulus_pa"):
+    with pytest.raises(ParameterError, match=r"material\.youngs_modulus_pa"):
         Material(youngs_modulus_pa="2.12e11")  # type: ignore[arg-type]
-    with pytest.raises(ParameterError, match="material.poisson_ratio"):
+    with pytest.raises(ParameterError, match=r"material\.poisson_ratio"):
         Material(poisson_ratio=0.6)
 
 
@@ -65,7 +65,7 @@ def test_misalignment_limits_and_units() -> None:
     tilt = Misalignment.from_arcmin(1.0, 0.0)
     assert tilt.tilt_x_rad == pytest.approx(math.radians(1 / 60))
     assert not tilt.is_aligned and Misalignment().is_aligned
-    with pytest.raises(ParameterError, match="misalignment.tilt_y_rad"):
+    with pytest.raises(ParameterError, match=r"misalignment\.tilt_y_rad"):
         Misalignment(tilt_y_rad=0.1)
 
 
@@ -76,10 +76,10 @@ def test_user_preset_file_in_scientific_notation(tmp_path: Path) -> None:
     path.write_text(text)
     assert load_preset_file(path).geometry.pitch_m == pytest.approx(2e-3)
     path.write_text(text.replace("pitch_m: 2e-3", "pitch_m: two"))
-    with pytest.raises(ParameterError, match="geometry.pitch_m"):
+    with pytest.raises(ParameterError, match=r"geometry\.pitch_m"):
         load_preset_file(path)
 
 
 def test_unknown_preset_lists_the_choices() -> None:
-    with pytest.raises(ParameterError, match="dong2022-downhole"):
+    with pytest.raises(ParameterError, match=r"dong2022-downhole"):
         load_preset("nope")
