@@ -284,7 +284,7 @@ def _newton(
     ) -> tuple[FloatArray, FloatArray, FloatArray, FloatArray]:
         q_s, _ = loads(d_s, k_sr)
         q_n, _ = loads(d_n, k_rn)
-        approach = 0.0 if symmetric else np.einsum("brk,bk->br", unit, glob[:, 1:])[..., None]
+        approach = 0.0 if symmetric else unit @ glob[:, 1:, None]
         r_s = (
             d_s / c
             - a[..., None]
@@ -307,7 +307,7 @@ def _newton(
         r_glob[:, 0] = (c * roller_sum.sum(axis=-1) - target_axial) * force_scale / c
         if not symmetric:
             r_glob[:, 1:] = (
-                cos_beta * np.einsum("br,brk->bk", roller_sum, unit) - target_radial
+                cos_beta * (roller_sum[:, None, :] @ unit)[:, 0] - target_radial
             ) * force_scale[:, None]
         return r_s, r_n, r_eq, r_glob
 
@@ -322,11 +322,13 @@ def _newton(
     d_n = np.broadcast_to((k_rn * q_ref ** (2.0 / 3.0))[:, None, None], (batch, rollers, z)).copy()
     a = np.zeros((batch, rollers))
     glob = np.zeros((batch, n_global))
-    r_s, r_n, _, _ = residuals(d_s, d_n, a, glob)
+    r_s, r_n, r_eq, r_glob = residuals(d_s, d_n, a, glob)
+    # The offsets enter the compatibility residuals linearly (r_s - a, r_n + a - offset).
     a = r_s.mean(axis=-1)
     glob[:, 0] = (r_n.mean(axis=-1) + a).mean(axis=-1)
+    parts = (r_s - a[..., None], r_n + a[..., None] - glob[:, :1, None], r_eq, r_glob)
     size = 2 * z + 1
-    diagonal = np.arange(2 * z)
+    eye = np.eye(z) / c
     # Jacobian entries that do not change between iterations.
     jac = np.zeros((batch, rollers, size, size))
     jac[..., :z, -1] = -1.0
@@ -336,7 +338,6 @@ def _newton(
     if not symmetric:
         border[..., :z, 1:] = -cos_beta / c * unit[:, :, None, :]
     c_rows = np.zeros((batch, rollers, n_global, size))
-    parts = residuals(d_s, d_n, a, glob)
     error = norm(parts)
     iterations = 0
     while np.any(error > tolerance):
@@ -353,7 +354,8 @@ def _newton(
         np.multiply(chain.screw_nut, dq_n[..., None, :], out=jac[..., :z, z : 2 * z])
         np.multiply(chain.screw_nut, dq_s[..., None, :], out=jac[..., z : 2 * z, :z])
         np.multiply(chain.nut_nut, dq_n[..., None, :], out=jac[..., z : 2 * z, z : 2 * z])
-        jac[..., diagonal, diagonal] += 1.0 / c
+        jac[..., :z, :z] += eye
+        jac[..., z : 2 * z, z : 2 * z] += eye
         weights = dq_s * force_scale[:, None, None]
         jac[..., -1, :z] = weights
         jac[..., -1, z : 2 * z] = -dq_n * force_scale[:, None, None]
@@ -368,11 +370,11 @@ def _newton(
         c_rows[..., 0, :z] = weights
         if not symmetric:
             c_rows[..., 1:, :z] = cos_beta * unit[..., :, None] * weights[..., None, :]
-        schur = np.einsum("brgs,brsh->bgh", c_rows, solved[..., 1:])
+        schur = (c_rows @ solved[..., 1:]).sum(axis=1)
         # [A B; C 0][dx; dy] = -[r; r_g]  =>  (C A^-1 B) dy = r_g - C A^-1 r.
-        schur_rhs = r_glob - np.einsum("brgs,brs->bg", c_rows, solved[..., 0])
+        schur_rhs = r_glob - (c_rows @ solved[..., :1]).sum(axis=1)[..., 0]
         step_glob = np.linalg.solve(schur, schur_rhs[..., None])[..., 0]
-        step = -solved[..., 0] - np.einsum("brsh,bh->brs", solved[..., 1:], step_glob)
+        step = -solved[..., 0] - (solved[..., 1:] @ step_glob[:, None, :, None])[..., 0]
         # Backtracking line search on the scaled residual norm, per batch member.
         alpha = np.ones(batch)
         for _ in range(30):

@@ -1,0 +1,178 @@
+"""Command-line entry point ``prsm-health``.
+
+Subcommands:
+  model   evaluate the PRSM physics at one operating point (table or --json)
+  demo    the model for every bundled preset at its paper's largest load
+Units at this edge are the engineers' ones (N, rpm, arcmin, mm, um/h); inside all is SI.
+"""
+
+from __future__ import annotations
+
+import argparse
+import dataclasses
+import json
+import math
+import sys
+from collections.abc import Sequence
+from typing import Any, NoReturn
+
+from prsm_health.physics.errors import PhysicsError
+from prsm_health.physics.geometry import Misalignment
+from prsm_health.physics.load_distribution import LoadingCase
+from prsm_health.physics.model import ModelResult, OperatingPoint, evaluate
+from prsm_health.physics.presets import PRESET_NAMES, load_preset
+
+EXIT_USAGE = 2
+RPM_TO_RAD_S = 2.0 * math.pi / 60.0
+M_PER_S_TO_UM_PER_H = 1e6 * 3600.0
+
+
+class _Parser(argparse.ArgumentParser):
+    """argparse with one-line errors (the usage text is for --help)."""
+
+    def error(self, message: str) -> NoReturn:
+        self.exit(EXIT_USAGE, f"{self.prog}: error: {message}\n")
+
+
+def _finite(text: str) -> float:
+    value = float(text)
+    if not math.isfinite(value):
+        raise argparse.ArgumentTypeError(f"not a finite number: {text!r}")
+    return value
+
+
+def _build_parser() -> _Parser:
+    parser = _Parser(prog="prsm-health", description=__doc__.splitlines()[0])
+    commands = parser.add_subparsers(dest="command", required=True, parser_class=_Parser)
+
+    model = commands.add_parser("model", help="evaluate the physics at one operating point")
+    model.add_argument(
+        "--preset", required=True, help=f"one of {', '.join(PRESET_NAMES)}, or a YAML file"
+    )
+    model.add_argument("--axial-load", type=_finite, required=True, metavar="N")
+    model.add_argument("--radial-load", type=_finite, default=0.0, metavar="N")
+    model.add_argument("--speed-rpm", type=_finite, default=300.0, metavar="RPM")
+    model.add_argument("--jammed", type=int, default=0, metavar="K", help="jammed rollers")
+    model.add_argument(
+        "--misalignment-arcmin", type=_finite, nargs=2, default=(0.0, 0.0), metavar=("X", "Y")
+    )
+    model.add_argument(
+        "--case",
+        type=int,
+        choices=(1, 2),
+        default=1,
+        help="1: screw in tension, nut in compression (as 004); 2: both in compression",
+    )
+    model.add_argument("--carrier-angle-deg", type=_finite, default=0.0, metavar="DEG")
+    model.add_argument(
+        "--elastic-errors", action="store_true", help="add 000's torsion elastic error"
+    )
+    model.add_argument(
+        "--wear-model",
+        choices=("archard", "fractal"),
+        help="override the preset's wear law (004 Archard or 001 fractal)",
+    )
+    model.add_argument("--json", action="store_true", help="print one JSON object")
+
+    commands.add_parser("demo", help="model every bundled preset at its largest paper load")
+    return parser
+
+
+def _point(args: argparse.Namespace) -> OperatingPoint:
+    return OperatingPoint(
+        axial_load_n=args.axial_load,
+        radial_load_n=args.radial_load,
+        screw_speed_rad_s=args.speed_rpm * RPM_TO_RAD_S,
+        jammed_rollers=args.jammed,
+        misalignment=Misalignment.from_arcmin(*args.misalignment_arcmin),
+        case=LoadingCase(args.case),
+        carrier_angle_rad=math.radians(args.carrier_angle_deg),
+        elastic_errors=args.elastic_errors,
+    )
+
+
+def result_to_json(preset_name: str, args: dict[str, Any], result: ModelResult) -> dict[str, Any]:
+    """The ``model --json`` document: inputs echoed, outputs in engineering units."""
+    loads = result.loads
+    return {
+        "inputs": {"preset": preset_name, **args},
+        "contact_force_screw_roller_n": loads.screw_roller_n.tolist(),
+        "contact_force_roller_nut_n": loads.roller_nut_n.tolist(),
+        "roller_axial_load_n": loads.roller_axial_load_n.tolist(),
+        "axial_clearance_mm": (result.meshing.axial_clearance_screw_roller_m * 1e3).tolist(),
+        "friction_torque_nm": float(result.friction.total_nm),
+        "efficiency": result.efficiency,
+        "precision_loss_rate_um_per_h": result.precision_loss_rate_m_per_s * M_PER_S_TO_UM_PER_H,
+        "fatigue_life_h": result.fatigue_life_h if math.isfinite(result.fatigue_life_h) else None,
+        "solver": {"iterations": loads.iterations, "scaled_residual": loads.residual},
+    }
+
+
+def _table(preset_name: str, result: ModelResult) -> str:
+    point, loads = result.point, result.loads
+    loss_rate_um_per_h = result.precision_loss_rate_m_per_s * M_PER_S_TO_UM_PER_H
+    lines = [
+        f"preset {preset_name}: F_a = {point.axial_load_n:.0f} N, F_r = "
+        f"{point.radial_load_n:.0f} N, {point.screw_speed_rad_s / RPM_TO_RAD_S:.0f} rpm, "
+        f"case {int(point.case)}, {point.jammed_rollers} jammed",
+        f"  friction torque          {float(result.friction.total_nm):10.4f} N m",
+        f"  efficiency               {result.efficiency:10.4f}",
+        f"  precision-loss rate      {loss_rate_um_per_h:10.3g} um/h",
+        f"  fatigue life             {result.fatigue_life_h:10.4g} h",
+        f"  peak contact force       {loads.screw_roller_n.max():10.1f} N (screw-roller), "
+        f"{loads.roller_nut_n.max():.1f} N (roller-nut)",
+        "  roller  axial load [N]  screw-roller force, thread 1 .. last [N]",
+    ]
+    for i, (axial, forces) in enumerate(
+        zip(loads.roller_axial_load_n, loads.screw_roller_n, strict=True), start=1
+    ):
+        lines.append(
+            f"  {i:6d}  {axial:14.1f}  {forces[0]:7.1f} .. {forces[-1]:7.1f}  "
+            f"(min {forces.min():.1f}, max {forces.max():.1f})"
+        )
+    return "\n".join(lines)
+
+
+def _run_model(args: argparse.Namespace) -> int:
+    preset = load_preset(args.preset)
+    if args.wear_model:
+        preset = dataclasses.replace(
+            preset, wear=dataclasses.replace(preset.wear, model=args.wear_model)
+        )
+    result = evaluate(preset, _point(args))
+    if args.json:
+        echoed = {k: v for k, v in vars(args).items() if k not in ("command", "json", "preset")}
+        echoed["misalignment_arcmin"] = list(args.misalignment_arcmin)
+        print(json.dumps(result_to_json(preset.name, echoed, result)))
+    else:
+        print(_table(preset.name, result))
+    return 0
+
+
+def _run_demo() -> int:
+    for name in PRESET_NAMES:
+        preset = load_preset(name)
+        point = OperatingPoint(
+            axial_load_n=preset.largest_axial_load_n,
+            radial_load_n=preset.largest_radial_load_n / 2.0,
+            screw_speed_rad_s=preset.largest_speed_rpm * RPM_TO_RAD_S,
+        )
+        print(_table(name, evaluate(preset, point)))
+        print()
+    return 0
+
+
+def main(argv: Sequence[str] | None = None) -> int:
+    """Run ``prsm-health``; physics errors become a one-line message and exit code 2."""
+    args = _build_parser().parse_args(argv)
+    try:
+        if args.command == "model":
+            return _run_model(args)
+        return _run_demo()
+    except (PhysicsError, ValueError) as exc:
+        print(f"prsm-health: error: {exc}", file=sys.stderr)
+        return EXIT_USAGE
+
+
+if __name__ == "__main__":
+    sys.exit(main())

@@ -1,0 +1,89 @@
+"""The ``prsm-health model`` command line: JSON content, table, one-line errors."""
+
+from __future__ import annotations
+
+import json
+
+import pytest
+
+from prsm_health.cli import main
+
+
+def run(capsys: pytest.CaptureFixture[str], *argv: str) -> tuple[int, str, str]:
+    code = main(list(argv))
+    out, err = capsys.readouterr()
+    return code, out, err
+
+
+def test_model_json_has_the_documented_fields(capsys: pytest.CaptureFixture[str]) -> None:
+    code, out, _ = run(
+        capsys,
+        "model",
+        "--preset",
+        "meng2022-misalignment",
+        "--axial-load",
+        "50000",
+        "--speed-rpm",
+        "300",
+        "--misalignment-arcmin",
+        "1",
+        "0",
+        "--json",
+    )
+    assert code == 0
+    doc = json.loads(out)
+    forces = doc["contact_force_screw_roller_n"]
+    assert len(forces) == 10 and len(forces[0]) == 20
+    assert len(doc["contact_force_roller_nut_n"][9]) == 20
+    assert len(doc["axial_clearance_mm"]) == 10
+    for key in ("friction_torque_nm", "efficiency", "precision_loss_rate_um_per_h"):
+        assert doc[key] > 0.0
+    assert 0.0 < doc["efficiency"] < 1.0
+    assert doc["fatigue_life_h"] > 0.0
+    assert doc["inputs"]["axial_load"] == 50000.0
+    assert doc["inputs"]["misalignment_arcmin"] == [1.0, 0.0]
+    # Misalignment makes clearances differ along the roller (004 Fig. 8).
+    clearances = doc["axial_clearance_mm"][0]
+    assert max(clearances) - min(clearances) > 1e-3
+
+
+def test_model_table_is_readable(capsys: pytest.CaptureFixture[str]) -> None:
+    code, out, _ = run(
+        capsys,
+        "model",
+        "--preset",
+        "dong2022-downhole",
+        "--axial-load",
+        "20000",
+        "--radial-load",
+        "4000",
+        "--case",
+        "2",
+    )
+    assert code == 0
+    assert "friction torque" in out and "case 2" in out
+    assert len(out.splitlines()) == 7 + 10
+
+
+@pytest.mark.parametrize(
+    "argv",
+    [
+        ["model", "--preset", "nope", "--axial-load", "1"],
+        ["model", "--preset", "li2020-jamming", "--axial-load", "nan"],
+        ["model", "--preset", "li2020-jamming", "--axial-load", "-5"],
+        ["model", "--preset", "li2020-jamming", "--axial-load", "100", "--jammed", "11"],
+        ["model", "--preset", "li2020-jamming", "--axial-load", "100", "--case", "3"],
+        ["model", "--preset", "li2020-jamming", "--axial-load", "100", "--radial-load", "500"],
+    ],
+)
+def test_invalid_arguments_give_one_line_and_exit_2(
+    capsys: pytest.CaptureFixture[str], argv: list[str]
+) -> None:
+    try:
+        code = main(argv)
+    except SystemExit as exc:  # argparse's own errors
+        code = int(exc.code or 0)
+    _, err = capsys.readouterr()
+    assert code == 2
+    assert len(err.strip().splitlines()) == 1
+    assert err.startswith("prsm-health")
