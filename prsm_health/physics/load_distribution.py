@@ -50,6 +50,10 @@ FloatArray = NDArray[np.float64]
 #: Nominal transmission efficiency used for the driving torque of the torsion term (000 eq. 3).
 TORSION_EFFICIENCY = 0.9
 
+#: Axial loads below this are treated as no load (zero forces, not solved): it keeps the
+#: equation scaling finite for denormal inputs and is far below any measurable load.
+NEGLIGIBLE_LOAD_N = 1e-9
+
 
 class LoadingCase(enum.IntEnum):
     """The two load paths of the downhole robot (paper 000, section 4.2)."""
@@ -209,7 +213,7 @@ def solve_load_distribution(
     axial_offset = np.zeros(size)
     radial_offset = np.zeros((size, 2))
     residual, iterations = 0.0, 0
-    loaded = flat > 0.0  # unloaded members are exactly zero: skip them
+    loaded = flat > NEGLIGIBLE_LOAD_N  # unloaded members are exactly zero: skip them
     if np.any(loaded):
         solved = _newton(
             geometry,

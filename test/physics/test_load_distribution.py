@@ -11,7 +11,9 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 
 from prsm_health.physics.errors import ConvergenceError, DomainError, ParameterError
+from prsm_health.physics.geometry import Misalignment
 from prsm_health.physics.load_distribution import LoadingCase, solve_load_distribution
+from prsm_health.physics.meshing import meshing
 from prsm_health.physics.presets import PRESET_NAMES, load_preset
 
 M004 = load_preset("meng2022-misalignment").geometry
@@ -22,6 +24,28 @@ def test_004_peak_screw_roller_force_at_50kn() -> None:
     """004 section 3.2: 585.5 N peak (aligned); the reproduction note finds ~613 N (+-6 %)."""
     result = solve_load_distribution(M004, 50_000.0)
     assert result.screw_roller_n.max() == pytest.approx(585.5, rel=0.06)
+
+
+@pytest.mark.parametrize(
+    ("tilt_arcmin", "paper_peak_n"), [((1.0, 0.0), 777.2), ((1.0, 1.0), 865.8)]
+)
+def test_004_misalignment_raises_the_peak_force_as_published(
+    tilt_arcmin: tuple[float, float], paper_peak_n: float
+) -> None:
+    """004 section 3.2: 1' about x: 585.5 -> 777.2 N; 1' about x and y: 865.8 N (at 50 kN)."""
+    mesh = meshing(M004, Misalignment.from_arcmin(*tilt_arcmin))
+    result = solve_load_distribution(
+        M004,
+        50_000.0,
+        clearance_screw_roller_m=mesh.axial_clearance_screw_roller_m,
+        clearance_roller_nut_m=mesh.axial_clearance_roller_nut_m,
+    )
+    assert result.screw_roller_n.max() == pytest.approx(paper_peak_n, rel=0.06)
+    aligned = solve_load_distribution(M004, 50_000.0)
+    # "significantly change" at the screw-roller interface, "slightly" at the roller-nut one.
+    sr_rise = result.screw_roller_n.max() / aligned.screw_roller_n.max()
+    rn_rise = result.roller_nut_n.max() / aligned.roller_nut_n.max()
+    assert sr_rise > 1.2 and rn_rise < sr_rise
 
 
 @pytest.mark.parametrize("case", list(LoadingCase))
@@ -114,6 +138,13 @@ def test_zero_load_gives_zero_forces_and_radial_without_axial_is_a_domain_error(
     assert result.screw_roller_n[1].sum() > 0.0
     with pytest.raises(DomainError, match="radial load without axial load"):
         solve_load_distribution(M004, 0.0, radial_load_n=100.0)
+
+
+def test_denormal_and_negligible_loads_are_zero_without_overflow() -> None:
+    with np.errstate(over="raise", divide="raise", invalid="raise"):
+        result = solve_load_distribution(D000, [2.2e-313, 1e-10, 1e-3])
+    assert not result.screw_roller_n[:2].any()
+    assert result.screw_roller_n[2].sum() * D000.axial_projection == pytest.approx(1e-3)
 
 
 def test_radial_load_beyond_capacity_is_a_domain_error() -> None:
