@@ -90,7 +90,8 @@ def fatigue_life_h(
 ) -> FloatArray:
     """Fatigue life L_S in hours (paper 000 eq. 29); inf at zero load or zero speed."""
     rate = damage_rate_per_s(geometry, params, screw_roller_n, screw_speed_rad_s)
-    life_s = np.divide(1.0, rate, out=np.full_like(rate, np.inf), where=rate > 0.0)
+    with np.errstate(over="ignore"):  # a denormal damage rate means an infinite life
+        life_s = np.divide(1.0, rate, out=np.full_like(rate, np.inf), where=rate > 0.0)
     return np.asarray(life_s / _SECONDS_PER_HOUR, dtype=np.float64)
 
 

@@ -35,8 +35,10 @@ from __future__ import annotations
 
 import enum
 import math
+from collections.abc import Callable
 from dataclasses import dataclass
-from functools import cache
+from functools import cache, partial
+from typing import NamedTuple
 
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
@@ -50,9 +52,17 @@ FloatArray = NDArray[np.float64]
 #: Nominal transmission efficiency used for the driving torque of the torsion term (000 eq. 3).
 TORSION_EFFICIENCY = 0.9
 
-#: Axial loads below this are treated as no load (zero forces, not solved): it keeps the
-#: equation scaling finite for denormal inputs and is far below any measurable load.
-NEGLIGIBLE_LOAD_N = 1e-9
+#: Axial loads below this are treated as no load (zero forces, not solved). 1 mN is 1e-8 of
+#: the papers' loads and far below what motor current resolves; below it the contact approaches
+#: are 1e7 times smaller than micron clearances and the contact set is ill-determined.
+NEGLIGIBLE_LOAD_N = 1e-3
+
+#: Stiffness given to open contacts in the Newton matrix only, relative to a contact at the
+#: mean load: keeps the matrix regular when few contacts touch; the solution is unchanged.
+OPEN_CONTACT_STIFFNESS_RATIO = 1e-8
+
+#: Relative round-off of a residual that sums a few dozen terms (64 machine epsilons).
+ROUNDOFF = 64.0 * float(np.finfo(float).eps)
 
 
 class LoadingCase(enum.IntEnum):
@@ -215,22 +225,29 @@ def solve_load_distribution(
     residual, iterations = 0.0, 0
     loaded = flat > NEGLIGIBLE_LOAD_N  # unloaded members are exactly zero: skip them
     if np.any(loaded):
-        solved = _newton(
+        solve = partial(
+            _newton,
             geometry,
             flat[loaded],
             radial.reshape(-1)[loaded],
             load_angle.reshape(-1)[loaded],
             carrier.reshape(-1)[loaded],
-            g_sr,
-            g_rn,
-            _chain_matrices(geometry, case, elastic_errors),
+            chain=_chain_matrices(geometry, case, elastic_errors),
             symmetric=symmetric,
             tolerance=tolerance,
             max_iterations=max_iterations,
         )
-        q_s[loaded], q_n[loaded] = solved[0], solved[1]
-        axial_offset[loaded], radial_offset[loaded] = solved[2], solved[3]
-        residual, iterations = solved[4], solved[5]
+        try:
+            solved = solve(g_sr, g_rn)
+        except ConvergenceError:
+            if symmetric:
+                raise
+            solved = _clearance_continuation(solve, g_sr, g_rn)
+        q_s[loaded], q_n[loaded] = solved.screw_roller_n, solved.roller_nut_n
+        axial_offset[loaded] = solved.state.glob[:, 0]
+        if not symmetric:
+            radial_offset[loaded] = solved.state.glob[:, 1:]
+        residual, iterations = solved.residual, solved.iterations
     return LoadDistribution(
         screw_roller_n=q_s.reshape(*batch_shape, n, z),
         roller_nut_n=q_n.reshape(*batch_shape, n, z),
@@ -242,6 +259,47 @@ def solve_load_distribution(
     )
 
 
+class _State(NamedTuple):
+    """Newton unknowns: approaches (batch, rollers, threads), roller and global offsets."""
+
+    d_s: FloatArray
+    d_n: FloatArray
+    a: FloatArray
+    glob: FloatArray
+
+
+@dataclass(frozen=True)
+class _Solved:
+    state: _State
+    screw_roller_n: FloatArray
+    roller_nut_n: FloatArray
+    residual: float
+    iterations: int
+
+
+#: Clearance scales of the continuation used when Newton fails from the cold start.
+CONTINUATION_STEPS = 8
+
+
+def _clearance_continuation(
+    solve: Callable[..., _Solved], g_sr: FloatArray, g_rn: FloatArray
+) -> _Solved:
+    """Solve with the clearances grown from zero to their value, warm-starting each step.
+
+    Without clearance differences the system is smooth; growing them opens contacts one by
+    one instead of asking Newton to find the contact set at once (small loads against the
+    clearances of a misalignment). Raises ConvergenceError if a step fails.
+    """
+    solved = solve(0.0 * g_sr, 0.0 * g_rn)
+    iterations = solved.iterations
+    for scale in np.linspace(0.0, 1.0, CONTINUATION_STEPS + 1)[1:]:
+        solved = solve(scale * g_sr, scale * g_rn, start=solved.state)
+        iterations += solved.iterations
+    return _Solved(
+        solved.state, solved.screw_roller_n, solved.roller_nut_n, solved.residual, iterations
+    )
+
+
 def _newton(
     geometry: Geometry,
     axial: FloatArray,
@@ -250,13 +308,14 @@ def _newton(
     carrier: FloatArray,
     g_sr: FloatArray,
     g_rn: FloatArray,
-    chain: _ChainMatrices,
     *,
+    chain: _ChainMatrices,
     symmetric: bool,
     tolerance: float,
     max_iterations: int,
-) -> tuple[FloatArray, FloatArray, FloatArray, FloatArray, float, int]:
-    """Damped Newton on the whole system; returns loads, offsets, residual and iterations."""
+    start: _State | None = None,
+) -> _Solved:
+    """Damped Newton on the whole system from ``start`` (or a uniform-load guess)."""
     contacts = thread_contacts(geometry)
     k_sr = contacts.screw_roller.deflection_constant
     k_rn = contacts.roller_nut.deflection_constant
@@ -315,22 +374,46 @@ def _newton(
             ) * force_scale[:, None]
         return r_s, r_n, r_eq, r_glob
 
+    # Compatibility residuals sum clearances that can be 1e4 times the approaches at tiny
+    # loads; their round-off floor joins the scale, so the tolerance stays reachable.
+    clearance_span = c * max(float(np.ptp(g_sr)), float(np.ptp(g_rn)))
+    kin_scale = delta_ref + ROUNDOFF * (clearance_span + delta_ref) / tolerance
+
     def norm(parts: tuple[FloatArray, FloatArray, FloatArray, FloatArray]) -> FloatArray:
+        """Largest scaled residual of each batch member (the convergence test)."""
         r_s, r_n, r_eq, r_glob = parts
         kin = np.maximum(np.abs(r_s).max(axis=(1, 2)), np.abs(r_n).max(axis=(1, 2))) * c
-        worst = np.maximum(kin / delta_ref, np.abs(r_eq).max(axis=1))
+        worst = np.maximum(kin / kin_scale, np.abs(r_eq).max(axis=1))
         return np.asarray(np.maximum(worst, np.abs(r_glob).max(axis=1)), dtype=np.float64)
 
+    def merit(parts: tuple[FloatArray, FloatArray, FloatArray, FloatArray]) -> FloatArray:
+        """Sum of squared scaled residuals: Newton's step is a descent direction for it."""
+        r_s, r_n, r_eq, r_glob = parts
+        kin = (np.square(r_s).sum(axis=(1, 2)) + np.square(r_n).sum(axis=(1, 2))) * c**2
+        forces = np.square(r_eq).sum(axis=1) + np.square(r_glob).sum(axis=1)
+        return np.asarray(kin / kin_scale**2 + forces, dtype=np.float64)
+
     # Initial guess: uniform loads; offsets that zero the mean compatibility residual.
-    d_s = np.broadcast_to((k_sr * q_ref ** (2.0 / 3.0))[:, None, None], (batch, rollers, z)).copy()
-    d_n = np.broadcast_to((k_rn * q_ref ** (2.0 / 3.0))[:, None, None], (batch, rollers, z)).copy()
-    a = np.zeros((batch, rollers))
-    glob = np.zeros((batch, n_global))
-    r_s, r_n, r_eq, r_glob = residuals(d_s, d_n, a, glob)
-    # The offsets enter the compatibility residuals linearly (r_s - a, r_n + a - offset).
-    a = r_s.mean(axis=-1)
-    glob[:, 0] = (r_n.mean(axis=-1) + a).mean(axis=-1)
-    parts = (r_s - a[..., None], r_n + a[..., None] - glob[:, :1, None], r_eq, r_glob)
+    # Start from uniform loads, less the clearances: at loads whose approaches are small
+    # against the clearances only the tightest contacts start (and end) closed.
+    d_s = (k_sr * q_ref ** (2.0 / 3.0))[:, None, None] - c * clear_s
+    d_n = (k_rn * q_ref ** (2.0 / 3.0))[:, None, None] - c * clear_n
+    # A vanishing stiffness for open contacts keeps the Newton matrix regular when few
+    # contacts touch; it is in the Jacobian only, so the converged solution is unchanged.
+    open_stiffness = OPEN_CONTACT_STIFFNESS_RATIO * 1.5 * np.sqrt(delta_ref)[:, None, None]
+    open_stiffness_s = open_stiffness / k_sr**1.5
+    open_stiffness_n = open_stiffness / k_rn**1.5
+    if start is None:
+        a = np.zeros((batch, rollers))
+        glob = np.zeros((batch, n_global))
+        r_s, r_n, r_eq, r_glob = residuals(d_s, d_n, a, glob)
+        # The offsets enter the compatibility residuals linearly (r_s - a, r_n + a - offset).
+        a = r_s.mean(axis=-1)
+        glob[:, 0] = (r_n.mean(axis=-1) + a).mean(axis=-1)
+        parts = (r_s - a[..., None], r_n + a[..., None] - glob[:, :1, None], r_eq, r_glob)
+    else:
+        d_s, d_n, a, glob = (np.array(x) for x in start)
+        parts = residuals(d_s, d_n, a, glob)
     size = 2 * z + 1
     eye = np.eye(z) / c
     # Jacobian entries that do not change between iterations.
@@ -343,6 +426,7 @@ def _newton(
         border[..., :z, 1:] = -cos_beta / c * unit[:, :, None, :]
     c_rows = np.zeros((batch, rollers, n_global, size))
     error = norm(parts)
+    current = merit(parts)
     iterations = 0
     while np.any(error > tolerance):
         if iterations == max_iterations:
@@ -354,6 +438,8 @@ def _newton(
         r_s, r_n, r_eq, r_glob = parts
         _, dq_s = loads(d_s, k_sr)
         _, dq_n = loads(d_n, k_rn)
+        dq_s += open_stiffness_s
+        dq_n += open_stiffness_n
         np.multiply(chain.screw_screw, dq_s[..., None, :], out=jac[..., :z, :z])
         np.multiply(chain.screw_nut, dq_n[..., None, :], out=jac[..., :z, z : 2 * z])
         np.multiply(chain.screw_nut, dq_s[..., None, :], out=jac[..., z : 2 * z, :z])
@@ -389,15 +475,19 @@ def _newton(
                 glob + alpha[:, None] * step_glob,
             )
             trial_parts = residuals(*trial)
-            trial_error = norm(trial_parts)
-            worse = trial_error > (1.0 - 1e-4 * alpha) * error
+            trial_merit = merit(trial_parts)
+            worse = trial_merit > (1.0 - 1e-4 * alpha) * current
             if not np.any(worse & (error > tolerance)):
                 break
             alpha = np.where(worse, alpha * 0.5, alpha)
         d_s, d_n, a, glob = trial
-        parts, error = trial_parts, trial_error
+        parts, current = trial_parts, trial_merit
+        error = norm(parts)
 
-    q_s, _ = loads(d_s, k_sr)
-    q_n, _ = loads(d_n, k_rn)
-    radial_offset = np.zeros((batch, 2)) if symmetric else glob[:, 1:]
-    return q_s, q_n, glob[:, 0], radial_offset, float(error.max(initial=0.0)), iterations
+    return _Solved(
+        state=_State(d_s, d_n, a, glob),
+        screw_roller_n=loads(d_s, k_sr)[0],
+        roller_nut_n=loads(d_n, k_rn)[0],
+        residual=float(error.max(initial=0.0)),
+        iterations=iterations,
+    )
