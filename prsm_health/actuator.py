@@ -1,0 +1,188 @@
+"""The actuator around the PRSM: motor, gearbox, inertia, and how a run is configured.
+
+Shared by the truth simulator (``prsm_health.scenes``) and the estimator
+(``prsm_health.estimation``), so both convert between motor current and screw torque with the
+same equations. The PRSM physics itself is in :mod:`prsm_health.physics`.
+
+Sign conventions (SI, motor side unless named ``screw``):
+
+- Positive motor rotation drives the screw at ``screw speed = motor speed / gear_ratio``.
+- The axial load is a signed force ``F`` along the screw axis; ``F > 0`` resists positive
+  rotation, so its screw torque is ``F L / 2 pi`` (L the lead). In the downhole cycle the
+  traction load always resists the stroke, so ``F`` changes sign with the motor direction.
+- Friction (PRSM and gearbox) opposes the screw speed.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, field
+from typing import Any
+
+import numpy as np
+from numpy.typing import ArrayLike, NDArray
+
+from prsm_health.physics.errors import ParameterError
+from prsm_health.physics.geometry import Misalignment, require, require_finite_positive
+from prsm_health.physics.load_distribution import LoadingCase
+from prsm_health.physics.presets import Preset, load_preset
+
+FloatArray = NDArray[np.float64]
+
+
+@dataclass(frozen=True, kw_only=True)
+class DriveTrain:
+    """Motor, gearbox and inertia between the motor current and the screw.
+
+    torque_constant_nm_per_a: k_t, motor torque per ampere.
+    gear_ratio: motor revolutions per screw revolution (1 = direct drive).
+    gear_efficiency: eta_g of the gearbox when the motor drives it; its loss is a torque
+        (1 - eta_g) / eta_g |T_screw| / gear_ratio that opposes the motion (so the motor
+        supplies T_screw / (gear_ratio eta_g) when it drives, and the loss vanishes at rest).
+    motor_inertia_kg_m2: rotor (and gearbox input) inertia, motor side.
+    screw_inertia_kg_m2: screw, carrier and the reflected translating mass, screw side.
+    max_current_a: the drive's current limit; larger measurements are out of range.
+
+    Defaults: the downhole traction actuator of this project (a 48 V brushless motor with a
+    5:1 planetary gearbox; paper 000 gives no drive-train data).
+    """
+
+    torque_constant_nm_per_a: float = 0.6
+    gear_ratio: float = 5.0
+    gear_efficiency: float = 0.95
+    motor_inertia_kg_m2: float = 2.0e-4
+    screw_inertia_kg_m2: float = 1.0e-3
+    max_current_a: float = 60.0
+
+    def __post_init__(self) -> None:
+        require_finite_positive(self, "drive_train")
+        require(self.gear_efficiency <= 1.0, "drive_train.gear_efficiency", "must be <= 1")
+
+    @property
+    def inertia_at_motor_kg_m2(self) -> float:
+        """Total inertia seen by the motor: J_m + J_s / G^2."""
+        return self.motor_inertia_kg_m2 + self.screw_inertia_kg_m2 / self.gear_ratio**2
+
+    def screw_speed_rad_s(self, motor_speed_rad_s: ArrayLike) -> FloatArray:
+        """Screw speed from the motor speed, omega_s = omega_m / G."""
+        return np.asarray(motor_speed_rad_s, dtype=np.float64) / self.gear_ratio
+
+    def motor_torque_nm(
+        self,
+        screw_torque_nm: ArrayLike,
+        screw_speed_rad_s: ArrayLike,
+        motor_acceleration_rad_s2: ArrayLike = 0.0,
+    ) -> FloatArray:
+        """Motor torque that turns the screw against ``screw_torque_nm`` (load + friction).
+
+        T_m = J_total alpha_m + T_s / G + sign(omega_s) (1 - eta_g) / eta_g |T_s| / G.
+        """
+        torque = np.asarray(screw_torque_nm, dtype=np.float64)
+        direction = np.sign(np.asarray(screw_speed_rad_s, dtype=np.float64))
+        loss = (1.0 - self.gear_efficiency) / self.gear_efficiency * np.abs(torque)
+        inertia = self.inertia_at_motor_kg_m2 * np.asarray(motor_acceleration_rad_s2, float)
+        return np.asarray(inertia + (torque + direction * loss) / self.gear_ratio, np.float64)
+
+    def current_a(
+        self,
+        screw_torque_nm: ArrayLike,
+        screw_speed_rad_s: ArrayLike,
+        motor_acceleration_rad_s2: ArrayLike = 0.0,
+    ) -> FloatArray:
+        """Motor current for :meth:`motor_torque_nm`, i = T_m / k_t."""
+        torque = self.motor_torque_nm(screw_torque_nm, screw_speed_rad_s, motor_acceleration_rad_s2)
+        return np.asarray(torque / self.torque_constant_nm_per_a, dtype=np.float64)
+
+
+def load_torque_nm(preset: Preset, axial_load_n: ArrayLike) -> FloatArray:
+    """Screw torque of the signed axial load, F L / 2 pi (L the lead n_s p; paper 002 eq. 19)."""
+    lead = preset.geometry.lead_m
+    return np.asarray(np.asarray(axial_load_n, dtype=np.float64) * lead / (2.0 * math.pi))
+
+
+@dataclass(frozen=True, kw_only=True)
+class Actuator:
+    """Everything known about the actuator being watched: PRSM, drive train, assembly.
+
+    preset: the PRSM (a bundled preset name or a preset YAML path; see physics/presets).
+    drive_train: motor, gearbox, inertia.
+    misalignment: the screw misalignment of the assembly (paper 004), if known.
+    case_forward, case_reverse: the loading case of paper 000 when the motor turns forward
+        or in reverse (downhole cycle: step (c), motor forward, nut moves = case 2; step (f),
+        motor reverse, nut fixed = case 1).
+    wear_acceleration: hours of wear per hour of running. 1 for a real actuator; scenes
+        raise it so that a short bag shows a measurable precision loss (bags/README.md).
+    """
+
+    preset: Preset
+    drive_train: DriveTrain = field(default_factory=DriveTrain)
+    misalignment: Misalignment = field(default_factory=Misalignment)
+    case_forward: LoadingCase = LoadingCase.BOTH_COMPRESSION
+    case_reverse: LoadingCase = LoadingCase.SCREW_TENSION_NUT_COMPRESSION
+    wear_acceleration: float = 1.0
+
+    def __post_init__(self) -> None:
+        require(
+            math.isfinite(self.wear_acceleration) and self.wear_acceleration > 0.0,
+            "actuator.wear_acceleration",
+            f"must be finite and > 0, got {self.wear_acceleration!r}",
+        )
+
+    def loading_case(self, motor_speed_rad_s: float) -> LoadingCase:
+        """The loading case for the motor's direction of rotation (forward at standstill)."""
+        return self.case_reverse if motor_speed_rad_s < 0.0 else self.case_forward
+
+
+_ACTUATOR_KEYS = {
+    "preset",
+    "drive_train",
+    "misalignment_arcmin",
+    "case_forward",
+    "case_reverse",
+    "wear_acceleration",
+}
+
+
+def _case(value: object, name: str) -> LoadingCase:
+    if value not in (1, 2) or isinstance(value, bool):
+        raise ParameterError(name, f"must be 1 or 2, got {value!r}")
+    return LoadingCase(value)
+
+
+def actuator_from_mapping(data: object) -> Actuator:
+    """Build an :class:`Actuator` from the ``actuator:`` section of a scene or params file.
+
+    Keys: preset (required), drive_train (mapping of :class:`DriveTrain` fields),
+    misalignment_arcmin ([x, y]), case_forward, case_reverse (1 or 2), wear_acceleration.
+    Unknown keys are refused with their name.
+    """
+    if not isinstance(data, dict):
+        raise ParameterError("actuator", f"must be a mapping, got {type(data).__name__}")
+    unknown = sorted(set(data) - _ACTUATOR_KEYS)
+    if unknown:
+        raise ParameterError(
+            f"actuator.{unknown[0]}", f"unknown key; allowed: {sorted(_ACTUATOR_KEYS)}"
+        )
+    if "preset" not in data:
+        raise ParameterError("actuator.preset", "missing")
+    drive: Any = data.get("drive_train") or {}
+    if not isinstance(drive, dict):
+        raise ParameterError("actuator.drive_train", "must be a mapping")
+    try:
+        drive_train = DriveTrain(**drive)
+    except TypeError as exc:
+        raise ParameterError("actuator.drive_train", str(exc)) from exc
+    tilt = data.get("misalignment_arcmin", [0.0, 0.0])
+    if not (isinstance(tilt, list) and len(tilt) == 2):
+        raise ParameterError("actuator.misalignment_arcmin", f"must be [x, y], got {tilt!r}")
+    scale = data.get("wear_acceleration", 1.0)
+    if isinstance(scale, bool) or not isinstance(scale, int | float):
+        raise ParameterError("actuator.wear_acceleration", f"must be a number, got {scale!r}")
+    return Actuator(
+        preset=load_preset(str(data["preset"])),
+        drive_train=drive_train,
+        misalignment=Misalignment.from_arcmin(float(tilt[0]), float(tilt[1])),
+        case_forward=_case(data.get("case_forward", 2), "actuator.case_forward"),
+        case_reverse=_case(data.get("case_reverse", 1), "actuator.case_reverse"),
+        wear_acceleration=float(scale),
+    )

@@ -1,0 +1,95 @@
+"""Time series that flow between the bag/ROS edges, the simulator and the estimator.
+
+Struct-of-arrays containers (numpy, SI units), so a whole bag or scene moves as a few arrays
+and the estimator can work on blocks of samples without a Python object per sample.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, fields
+
+import numpy as np
+from numpy.typing import NDArray
+
+FloatArray = NDArray[np.float64]
+IntArray = NDArray[np.int64]
+BoolArray = NDArray[np.bool_]
+
+
+def _check_lengths(obj: object) -> None:
+    lengths = {f.name: len(getattr(obj, f.name)) for f in fields(obj)}  # type: ignore[arg-type]
+    if len(set(lengths.values())) > 1:
+        raise ValueError(f"{type(obj).__name__}: fields differ in length: {lengths}")
+
+
+@dataclass(frozen=True)
+class MotorSamples:
+    """Motor measurements, one entry per sample (``prsm_health_msgs/MotorState``).
+
+    stamp_s: header stamp [s] (may jitter, repeat or go backwards in faulty data).
+    current_a: motor current [A]. speed_rad_s: motor speed [rad/s].
+    position_rad: motor position, multi-turn (not wrapped) [rad].
+    Values are as received: NaN, inf and out-of-range samples are the estimator's to reject.
+    """
+
+    stamp_s: FloatArray
+    current_a: FloatArray
+    speed_rad_s: FloatArray
+    position_rad: FloatArray
+
+    def __post_init__(self) -> None:
+        _check_lengths(self)
+
+    def __len__(self) -> int:
+        return len(self.stamp_s)
+
+    def __getitem__(self, index: slice) -> MotorSamples:
+        """The samples of a slice (views, no copy)."""
+        return MotorSamples(
+            self.stamp_s[index],
+            self.current_a[index],
+            self.speed_rad_s[index],
+            self.position_rad[index],
+        )
+
+    @classmethod
+    def concatenate(cls, parts: list[MotorSamples]) -> MotorSamples:
+        """One run from consecutive parts."""
+        return cls(*(np.concatenate([getattr(p, f.name) for p in parts]) for f in fields(cls)))
+
+
+@dataclass(frozen=True)
+class TruthSamples:
+    """Ground truth of a simulated run (``prsm_health_msgs/GroundTruth`` on ``/truth/state``).
+
+    axial_load_n: signed axial load F (> 0 resists positive rotation; see actuator.py) [N].
+    radial_load_n: radial load [N]. loading_case: 1 or 2 (paper 000).
+    roller_jammed: (samples, n_rollers) bool; jammed_rollers is its count per sample.
+    precision_loss_m: accumulated precision loss (with the scene's wear acceleration) [m].
+    friction_torque_nm: PRSM friction torque on the screw, opposing the motion [N m].
+    fatigue_damage: Palmgren-Miner damage fraction. screw_speed_rad_s, carrier_angle_rad:
+    kinematics. wear_coefficient_factor: the scene's wear coefficient over the preset's.
+    """
+
+    stamp_s: FloatArray
+    axial_load_n: FloatArray
+    radial_load_n: FloatArray
+    loading_case: IntArray
+    roller_jammed: BoolArray
+    precision_loss_m: FloatArray
+    friction_torque_nm: FloatArray
+    fatigue_damage: FloatArray
+    screw_speed_rad_s: FloatArray
+    carrier_angle_rad: FloatArray
+    wear_coefficient_factor: FloatArray
+
+    def __post_init__(self) -> None:
+        _check_lengths(self)
+
+    def __len__(self) -> int:
+        return len(self.stamp_s)
+
+    @property
+    def jammed_rollers(self) -> IntArray:
+        """Number of jammed rollers per sample."""
+        return np.asarray(self.roller_jammed.sum(axis=1), dtype=np.int64)
