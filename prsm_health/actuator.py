@@ -17,11 +17,11 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass, field
-from typing import Any
 
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
+from prsm_health.config import build_dataclass
 from prsm_health.physics.errors import ParameterError
 from prsm_health.physics.geometry import Misalignment, require, require_finite_positive
 from prsm_health.physics.load_distribution import LoadingCase
@@ -165,13 +165,7 @@ def actuator_from_mapping(data: object) -> Actuator:
         )
     if "preset" not in data:
         raise ParameterError("actuator.preset", "missing")
-    drive: Any = data.get("drive_train") or {}
-    if not isinstance(drive, dict):
-        raise ParameterError("actuator.drive_train", "must be a mapping")
-    try:
-        drive_train = DriveTrain(**drive)
-    except TypeError as exc:
-        raise ParameterError("actuator.drive_train", str(exc)) from exc
+    drive_train = build_dataclass(DriveTrain, data.get("drive_train"), "actuator.drive_train")
     tilt = data.get("misalignment_arcmin", [0.0, 0.0])
     if not (isinstance(tilt, list) and len(tilt) == 2):
         raise ParameterError("actuator.misalignment_arcmin", f"must be [x, y], got {tilt!r}")

@@ -12,6 +12,7 @@ from importlib import resources
 from pathlib import Path
 from typing import Any
 
+from prsm_health.config import build_dataclass
 from prsm_health.physics.errors import ParameterError
 from prsm_health.physics.geometry import Geometry, Material, require
 from prsm_health.physics.parameters import FatigueParameters, FrictionParameters, WearParameters
@@ -45,15 +46,6 @@ class Preset:
         require(self.largest_speed_rpm > 0, "largest_speed_rpm", "must be > 0")
 
 
-def _build(cls: type[Any], section: object, name: str) -> Any:
-    if not isinstance(section, dict):
-        raise ParameterError(name, f"must be a mapping, got {type(section).__name__}")
-    try:
-        return cls(**section)
-    except TypeError as exc:  # unknown or missing keys
-        raise ParameterError(name, str(exc)) from exc
-
-
 def _number(data: dict[str, Any], key: str) -> float:
     value = data[key]
     if isinstance(value, bool) or not isinstance(value, int | float):
@@ -66,16 +58,16 @@ def preset_from_mapping(data: dict[str, Any]) -> Preset:
     try:
         geometry_section = dict(data["geometry"])
         materials = {
-            part: _build(Material, geometry_section.pop(part, {}), f"geometry.{part}")
+            part: build_dataclass(Material, geometry_section.pop(part, {}), f"geometry.{part}")
             for part in ("screw", "roller", "nut")
         }
         return Preset(
             name=str(data["name"]),
             source=str(data["source"]),
-            geometry=_build(Geometry, {**geometry_section, **materials}, "geometry"),
-            friction=_build(FrictionParameters, data.get("friction") or {}, "friction"),
-            wear=_build(WearParameters, data.get("wear") or {}, "wear"),
-            fatigue=_build(FatigueParameters, data.get("fatigue") or {}, "fatigue"),
+            geometry=build_dataclass(Geometry, geometry_section, "geometry", **materials),
+            friction=build_dataclass(FrictionParameters, data.get("friction"), "friction"),
+            wear=build_dataclass(WearParameters, data.get("wear"), "wear"),
+            fatigue=build_dataclass(FatigueParameters, data.get("fatigue"), "fatigue"),
             largest_axial_load_n=_number(data, "largest_axial_load_n"),
             largest_radial_load_n=_number(data, "largest_radial_load_n"),
             largest_speed_rpm=_number(data, "largest_speed_rpm"),

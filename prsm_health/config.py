@@ -1,0 +1,35 @@
+"""Building validated frozen dataclasses from parsed YAML sections.
+
+Presets, scenes and estimator parameters are YAML files written by engineers; a typo must be
+refused with the dotted name of the key, not ignored or reported as a Python TypeError.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+from typing import Any, TypeVar
+
+from prsm_health.physics.errors import ParameterError
+
+T = TypeVar("T")
+
+
+def build_dataclass(cls: type[T], section: object, name: str, **fixed: Any) -> T:
+    """``cls(**section, **fixed)``, refusing non-mappings and unknown keys by dotted name.
+
+    Missing keys take the dataclass defaults; a missing key without default is named too.
+    The dataclass's own validation (``__post_init__``) names bad values.
+    """
+    if section is None:
+        section = {}
+    if not isinstance(section, dict):
+        raise ParameterError(name, f"must be a mapping, got {type(section).__name__}")
+    known = {f.name for f in dataclasses.fields(cls)}  # type: ignore[arg-type]
+    for key in section:
+        if key not in known or key in fixed:
+            allowed = ", ".join(sorted(known - set(fixed)))
+            raise ParameterError(f"{name}.{key}", f"unknown key; allowed: {allowed}")
+    try:
+        return cls(**section, **fixed)
+    except TypeError as exc:  # a required key is missing
+        raise ParameterError(name, str(exc)) from exc
