@@ -43,8 +43,8 @@ class MotorSamples:
     def __len__(self) -> int:
         return len(self.stamp_s)
 
-    def __getitem__(self, index: slice) -> MotorSamples:
-        """The samples of a slice (views, no copy)."""
+    def __getitem__(self, index: slice | BoolArray | IntArray) -> MotorSamples:
+        """The samples of a slice (views) or of a mask or index array (copies)."""
         return MotorSamples(
             self.stamp_s[index],
             self.current_a[index],

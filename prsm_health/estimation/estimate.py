@@ -1,0 +1,59 @@
+"""What the estimator says at each update: the content of ``HealthEstimate`` (SI inside)."""
+
+from __future__ import annotations
+
+import enum
+from dataclasses import dataclass
+
+#: Metres to micrometres, and per second to per hour, at the message edge.
+UM_PER_M = 1e6
+S_PER_H = 3600.0
+
+
+class EstimateEvent(enum.IntEnum):
+    """What happened at this estimate (``HealthEstimate.EVENT_*``)."""
+
+    NONE = 0
+    STANDSTILL = 1
+    TIME_RESET = 2
+    DIVERGENCE_RECOVERED = 3
+
+
+@dataclass(frozen=True)
+class HealthState:
+    """One health estimate (one filter update).
+
+    axial_load_n: signed load (> 0 resists positive motor rotation); the message carries its
+    magnitude. jam_probabilities[k]: probability that k rollers are jammed (sums to 1).
+    precision_loss_m and its std, rate [m/s]; friction_torque_nm (magnitude), efficiency
+    (paper 002 eq. 19); fatigue_damage (Miner) and its std; screw_speed_rad_s; samples
+    accepted and rejected so far; nis: mean normalised innovation squared over the
+    divergence window (about 1 when the filter is consistent); event.
+    """
+
+    stamp_s: float
+    axial_load_n: float
+    axial_load_std_n: float
+    jam_probabilities: tuple[float, ...]
+    precision_loss_m: float
+    precision_loss_std_m: float
+    precision_loss_rate_m_per_s: float
+    friction_torque_nm: float
+    efficiency: float
+    fatigue_damage: float
+    fatigue_damage_std: float
+    screw_speed_rad_s: float
+    samples_accepted: int
+    samples_rejected: int
+    nis: float
+    event: EstimateEvent
+
+    @property
+    def jammed_rollers_most_likely(self) -> int:
+        """The jam count with the largest probability."""
+        return max(range(len(self.jam_probabilities)), key=self.jam_probabilities.__getitem__)
+
+    @property
+    def jam_probability(self) -> float:
+        """Probability that at least one roller is jammed."""
+        return 1.0 - self.jam_probabilities[0]

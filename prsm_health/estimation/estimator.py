@@ -1,0 +1,191 @@
+"""The health estimator: motor samples in, :class:`HealthState` estimates out.
+
+One object serves offline replay (chunks of thousands of samples), the ROS node (one sample at
+a time) and the benchmark; results do not depend on the chunking. The pipeline per block:
+:class:`~prsm_health.estimation.inputs.SampleBlocker` (validation, blocks) ->
+:class:`~prsm_health.estimation.hypotheses.JamHypotheses` (IMM of filterpy filters over the
+jam count, measurement model of :mod:`~prsm_health.estimation.measurement`) ->
+:class:`~prsm_health.estimation.degradation.DegradationIntegrator` (precision loss, fatigue).
+docs/estimation.md explains the model, what is observable and each option.
+"""
+
+from __future__ import annotations
+
+import math
+from collections import deque
+
+import numpy as np
+
+from prsm_health.estimation.degradation import DegradationIntegrator
+from prsm_health.estimation.estimate import EstimateEvent, HealthState
+from prsm_health.estimation.hypotheses import JamHypotheses, StepResult
+from prsm_health.estimation.inputs import Block, InputCounters, SampleBlocker, merge_blocks
+from prsm_health.estimation.measurement import LOAD, TorqueModel
+from prsm_health.estimation.params import EstimatorParams
+from prsm_health.estimation.surrogate import physics_averages
+from prsm_health.physics.friction import efficiency
+from prsm_health.physics.load_distribution import radial_capacity_ratio
+from prsm_health.signals import MotorSamples
+
+#: Consecutive gated blocks after which the load is re-initialised (a lasting change that no
+#: hypothesis explains, e.g. a load step far beyond the load model).
+GATED_BLOCKS_BEFORE_RESET = 5
+#: The NIS divergence test needs at least this many blocks in its window.
+MIN_BLOCKS_FOR_DIVERGENCE = 10
+
+
+class HealthEstimator:
+    """Estimates load, jammed rollers, precision loss and fatigue from motor samples."""
+
+    def __init__(self, params: EstimatorParams) -> None:
+        self.params = params
+        self._blocker = SampleBlocker(params)
+        self._model = TorqueModel(params)
+        self._bank = JamHypotheses(params, self._model)
+        self._degradation = DegradationIntegrator(
+            wear_coefficient_sigma_ln=params.model.wear_coefficient_sigma_ln,
+            radial_relative_sensitivity=_radial_sensitivity(params),
+        )
+        self._standstill: list[Block] = []
+        self._nis: deque[tuple[float, float]] = deque()
+        self._gated_run = 0
+
+    @property
+    def counters(self) -> InputCounters:
+        """Samples accepted and rejected (by reason) so far."""
+        return self._blocker.counters
+
+    def process(self, samples: MotorSamples) -> list[HealthState]:
+        """Feed samples (any number); returns the estimates of the blocks they complete."""
+        return self._run(self._blocker.feed(samples))
+
+    def finish(self) -> list[HealthState]:
+        """Estimates of the samples still pending (call at the end of a bag)."""
+        states = self._run(self._blocker.flush())
+        if self._standstill:
+            states.append(self._update(merge_blocks(self._standstill)))
+            self._standstill.clear()
+        return states
+
+    def _run(self, blocks: list[Block]) -> list[HealthState]:
+        states = []
+        fidelity = self.params.fidelity
+        for block in blocks:
+            quiet = block.direction == 0 and not block.time_reset and not block.after_gap
+            if fidelity.merge_standstill_blocks and quiet:
+                self._standstill.append(block)
+                span = block.stamp_s - self._standstill[0].stamp_s
+                if span + self.params.filter.block_duration_s >= fidelity.standstill_block_s:
+                    states.append(self._update(merge_blocks(self._standstill)))
+                    self._standstill.clear()
+                continue
+            if self._standstill:
+                states.append(self._update(merge_blocks(self._standstill)))
+                self._standstill.clear()
+            states.append(self._update(block))
+        return states
+
+    def _update(self, block: Block) -> HealthState:
+        event = EstimateEvent.STANDSTILL if block.direction == 0 else EstimateEvent.NONE
+        if block.time_reset:
+            self._bank.reinitialise_load()
+            self._nis.clear()
+            event = EstimateEvent.TIME_RESET
+        step = self._bank.step(block)
+        if self._diverged(block, step):
+            self._bank.reinitialise_load()
+            self._nis.clear()
+            self._gated_run = 0
+            event = EstimateEvent.DIVERGENCE_RECOVERED
+        probabilities = {k: math.exp(v) for k, v in self._bank.log_prob.items()}
+        filters = self._bank.filters
+        load_std = {k: math.sqrt(filters[k].P[LOAD, LOAD]) for k in filters}
+        moving = block.direction != 0
+        if moving or not self.params.fidelity.skip_standstill:
+            duration = min(block.duration_s, self.params.filter.max_gap_s)
+            self._degradation.add(duration, probabilities, step.predictions, load_std)
+        else:
+            self._degradation.stop()
+        return self._state(block, step, probabilities, event)
+
+    def _diverged(self, block: Block, step: StepResult) -> bool:
+        """Gated for too long, or the mean NIS of the likeliest hypothesis too large."""
+        self._gated_run = self._gated_run + 1 if step.gated else 0
+        if self._gated_run >= GATED_BLOCKS_BEFORE_RESET:
+            return True
+        if step.gated:
+            return False
+        best = max(self._bank.log_prob, key=self._bank.log_prob.__getitem__)
+        if best in step.nis:
+            self._nis.append((block.stamp_s, step.nis[best]))
+        window = self.params.filter.divergence_window_s
+        while self._nis and self._nis[0][0] < block.stamp_s - window:
+            self._nis.popleft()
+        if len(self._nis) < MIN_BLOCKS_FOR_DIVERGENCE:
+            return False
+        return self._mean_nis() > self.params.filter.divergence_nis
+
+    def _mean_nis(self) -> float:
+        return float(np.mean([value for _, value in self._nis])) if self._nis else math.nan
+
+    def _state(
+        self,
+        block: Block,
+        step: StepResult,
+        probabilities: dict[int, float],
+        event: EstimateEvent,
+    ) -> HealthState:
+        filters = self._bank.filters
+        load = sum(mu * float(filters[k].x[LOAD]) for k, mu in probabilities.items())
+        load_var = sum(
+            mu * (float(filters[k].P[LOAD, LOAD]) + (float(filters[k].x[LOAD]) - load) ** 2)
+            for k, mu in probabilities.items()
+        )
+        friction = sum(
+            mu * step.predictions[k].friction_torque_nm for k, mu in probabilities.items()
+        )
+        geometry = self.params.actuator.preset.geometry
+        counters = self._blocker.counters
+        degradation = self._degradation.state
+        jam = self._bank.probabilities()
+        nis = self._mean_nis()
+        return HealthState(
+            stamp_s=block.stamp_s,
+            axial_load_n=load,
+            axial_load_std_n=math.sqrt(load_var),
+            jam_probabilities=tuple(float(p) for p in jam),
+            precision_loss_m=degradation.precision_loss_m,
+            precision_loss_std_m=self._degradation.precision_loss_std_m,
+            precision_loss_rate_m_per_s=degradation.rate_m_per_s,
+            friction_torque_nm=friction,
+            efficiency=float(efficiency(geometry, abs(load), friction)),
+            fatigue_damage=degradation.fatigue_damage,
+            fatigue_damage_std=self._degradation.fatigue_damage_std,
+            screw_speed_rad_s=block.motor_speed_rad_s / self.params.actuator.drive_train.gear_ratio,
+            samples_accepted=counters.accepted,
+            samples_rejected=counters.rejected_total,
+            nis=nis if math.isfinite(nis) else 0.0,
+            event=event,
+        )
+
+
+def _radial_sensitivity(params: EstimatorParams) -> float:
+    """Relative change of the healthy wear rate for one std of the radial ratio (at half the
+    preset's largest load)."""
+    ratio, std = params.model.radial_load_ratio, params.model.radial_load_ratio_std
+    if not params.radial_terms or std == 0.0:
+        return 0.0
+    preset = params.actuator.preset
+    upper = min(ratio + std, 0.9 * radial_capacity_ratio(preset.geometry))
+    nominal, shifted = (
+        float(
+            physics_averages(
+                preset,
+                [0.5 * preset.largest_axial_load_n],
+                radial_ratio=r,
+                misalignment=params.actuator.misalignment,
+            ).wear_healthy_m[0]
+        )
+        for r in (ratio, upper)
+    )
+    return abs(shifted - nominal) / nominal if nominal > 0.0 else 0.0

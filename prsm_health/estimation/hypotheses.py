@@ -1,0 +1,288 @@
+"""Jam-count hypotheses: an interacting multiple model (IMM) over filterpy Kalman filters.
+
+Hypothesis k says "k rollers are jammed"; each has its own filter over the continuous state
+(load, load rate, ripple) and a probability. One step per block, as in the IMM of Blom and
+Bar-Shalom (the equations of filterpy's ``IMMEstimator``):
+
+1. mixing: c_j = sum_i pi_ij mu_i, x0_j = sum_i pi_ij mu_i x_i / c_j, P0_j likewise plus the
+   spread of the means; jams only ever increase, so pi is upper bidiagonal over one block:
+   pi_{k,k} = 1 - p, pi_{k,k+1} = p with p = 1 - exp(-rate dt). A jump k -> k + 1 adds a
+   ripple of unknown phase: its covariance (harmonic_prior_std_nm^2 on c and s) is added;
+2. each filter predicts and updates (filterpy ``ExtendedKalmanFilter`` or
+   ``UnscentedKalmanFilter``; Joseph-form covariance update in the EKF);
+3. mu_j proportional to c_j times the measurement likelihood N(y; 0, S_j). At standstill the
+   likelihoods are not used: the stiction band carries no evidence about jams.
+
+What filterpy's ``IMMEstimator`` does not do and this does: pruning (a hypothesis below
+``filter.min_hypothesis_probability`` is dropped, and only the next count above the plausible
+ones is kept to catch a new jam), gating (a block that no hypothesis explains is not used),
+and numerical repair of the covariances (symmetrised, variance floors, positive definite).
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+from typing import Any
+
+import numpy as np
+from filterpy.kalman import ExtendedKalmanFilter, MerweScaledSigmaPoints, UnscentedKalmanFilter
+from numpy.typing import NDArray
+
+from prsm_health.estimation.inputs import Block
+from prsm_health.estimation.measurement import (
+    LOAD,
+    LOAD_RATE,
+    RIPPLE_COS,
+    Prediction,
+    TorqueModel,
+)
+from prsm_health.estimation.params import EstimatorParams
+
+FloatArray = NDArray[np.float64]
+Filter = Any  # filterpy filters carry no type information
+
+#: Smallest variance kept on each state, relative to its initial variance.
+VARIANCE_FLOOR_RATIO = 1e-12
+
+
+def safe_sqrt(matrix: FloatArray) -> FloatArray:
+    """Upper Cholesky factor of a symmetric matrix, repaired to positive definite if needed.
+
+    filterpy's sigma points take U with U.T @ U = P (scipy's upper Cholesky). A matrix that
+    lost positive definiteness to round-off has its eigenvalues clipped to a floor first.
+    """
+    symmetric = 0.5 * (matrix + matrix.T)
+    try:
+        return np.asarray(np.linalg.cholesky(symmetric).T, dtype=np.float64)
+    except np.linalg.LinAlgError:
+        return np.asarray(np.linalg.cholesky(repair_covariance(symmetric)).T, dtype=np.float64)
+
+
+def repair_covariance(matrix: FloatArray, floor: FloatArray | None = None) -> FloatArray:
+    """Symmetric positive definite version of ``matrix``: eigenvalues clipped to a floor."""
+    symmetric = 0.5 * (matrix + matrix.T)
+    values, vectors = np.linalg.eigh(symmetric)
+    smallest = max(float(np.abs(values).max()) * 1e-12, 1e-300)
+    if floor is not None:
+        smallest = max(smallest, float(floor.min()))
+    values = np.maximum(values, smallest)
+    return np.asarray((vectors * values) @ vectors.T, dtype=np.float64)
+
+
+@dataclass(frozen=True)
+class StepResult:
+    """What one block did to the hypotheses.
+
+    predictions: per active hypothesis, the model's prediction at its updated state.
+    nis: normalised innovation squared per active hypothesis (before the update).
+    gated: no hypothesis explained the block; it was not used.
+    """
+
+    predictions: dict[int, Prediction]
+    nis: dict[int, float]
+    gated: bool
+
+
+class JamHypotheses:
+    """The IMM bank (see the module docstring)."""
+
+    def __init__(self, params: EstimatorParams, model: TorqueModel) -> None:
+        self._params = params
+        self._model = model
+        self._dim = model.dim
+        self.n_rollers = model.n_rollers
+        self._rate_per_s = params.model.jam_rate_per_h / 3600.0
+        self._prune = params.fidelity.prune_hypotheses
+        rated = params.rated_load_n
+        initial = np.zeros(self._dim)
+        initial[LOAD] = rated**2
+        initial[LOAD_RATE] = (rated / 1.0) ** 2
+        if self._dim == 4:
+            initial[RIPPLE_COS:] = params.model.harmonic_prior_std_nm**2
+        self._initial_var = initial
+        self._floor = initial * VARIANCE_FLOOR_RATIO
+        self._jump_cov = np.zeros((self._dim, self._dim))
+        if self._dim == 4:
+            self._jump_cov[RIPPLE_COS:, RIPPLE_COS:] = (
+                np.eye(2) * params.model.harmonic_prior_std_nm**2
+            )
+        start = params.model.initial_jammed_rollers
+        self.filters: dict[int, Filter] = {}
+        self.log_prob: dict[int, float] = {}
+        counts = [start] if self._prune else list(range(self.n_rollers + 1))
+        for k in counts:
+            self.filters[k] = self._new_filter(np.zeros(self._dim), np.diag(initial))
+            self.log_prob[k] = 0.0 if k == start else -math.inf
+
+    # --- filters ------------------------------------------------------------------------
+    def _new_filter(self, x: FloatArray, p: FloatArray) -> Filter:
+        if self._params.fidelity.filter == "ukf":
+            points = MerweScaledSigmaPoints(
+                self._dim, alpha=0.5, beta=2.0, kappa=0.0, sqrt_method=safe_sqrt
+            )
+            kf = UnscentedKalmanFilter(
+                self._dim, 1, 1.0, hx=None, fx=_transition_apply, points=points
+            )
+        else:
+            kf = ExtendedKalmanFilter(self._dim, 1)
+        kf.x = x.copy()
+        kf.P = p.copy()
+        return kf
+
+    def _process(self, jammed: int, dt: float) -> tuple[FloatArray, FloatArray]:
+        """Transition matrix and process noise over dt (constant-rate load, random-walk ripple)."""
+        transition = np.eye(self._dim)
+        transition[LOAD, LOAD_RATE] = dt
+        q = self._params.model.load_acceleration_psd_n2_per_s3
+        noise = np.zeros((self._dim, self._dim))
+        noise[:2, :2] = q * np.array([[dt**3 / 3.0, dt**2 / 2.0], [dt**2 / 2.0, dt]])
+        if self._dim == 4 and jammed:
+            walk = self._params.model.harmonic_random_walk_nm_per_sqrt_s
+            noise[RIPPLE_COS:, RIPPLE_COS:] = np.eye(2) * walk**2 * dt
+        return transition, noise
+
+    # --- the IMM step -------------------------------------------------------------------
+    def probabilities(self) -> FloatArray:
+        """Probability of each jam count 0..N (zeros for pruned counts), summing to 1."""
+        probs = np.zeros(self.n_rollers + 1)
+        for k, value in self.log_prob.items():
+            probs[k] = math.exp(value)
+        return np.asarray(probs / probs.sum(), dtype=np.float64)
+
+    def _mix(self, dt: float) -> None:
+        """IMM mixing over one block (step 1), activating the next jam count if pruned."""
+        p_jump = -math.expm1(-self._rate_per_s * dt)
+        log_stay, log_jump = math.log1p(-p_jump), math.log(p_jump) if p_jump > 0 else -math.inf
+        targets = sorted(self.filters)
+        top = targets[-1]
+        if top < self.n_rollers and top + 1 not in self.filters:
+            targets.append(top + 1)
+        mixed: dict[int, tuple[FloatArray, FloatArray, float]] = {}
+        for j in targets:
+            sources = []
+            if j in self.filters:
+                stay = self.log_prob[j] + (log_stay if j < self.n_rollers else 0.0)
+                sources.append((stay, self.filters[j], 0))
+            if j - 1 in self.filters:
+                sources.append((self.log_prob[j - 1] + log_jump, self.filters[j - 1], 1))
+            logs = np.array([s[0] for s in sources])
+            total = float(np.logaddexp.reduce(logs)) if len(logs) else -math.inf
+            if not math.isfinite(total):  # no probability flows here: keep the state
+                kf = self.filters.get(j) or sources[0][1]
+                mixed[j] = (kf.x.copy(), kf.P.copy(), -math.inf)
+                continue
+            weights = np.exp(logs - total)
+            x0 = sum(w * s[1].x for w, s in zip(weights, sources, strict=True))
+            p0 = np.zeros((self._dim, self._dim))
+            for w, (_, kf, jump) in zip(weights, sources, strict=True):
+                d = kf.x - x0
+                p0 += w * (kf.P + np.outer(d, d) + jump * self._jump_cov)
+            mixed[j] = (np.asarray(x0, dtype=np.float64), p0, total)
+        for j, (x0, p0, total) in mixed.items():
+            if j not in self.filters:
+                self.filters[j] = self._new_filter(x0, p0)
+            else:
+                self.filters[j].x, self.filters[j].P = x0, p0
+            self.log_prob[j] = total
+
+    def step(self, block: Block) -> StepResult:
+        """Mix, predict, update and reweight for one block (see the module docstring)."""
+        dt = block.duration_s
+        self._mix(dt)
+        predictions: dict[int, Prediction] = {}
+        nis: dict[int, float] = {}
+        log_likelihood: dict[int, float] = {}
+        z = np.array([block.motor_torque_nm])
+        for k, kf in self.filters.items():
+            transition, noise = self._process(k, dt)
+            if isinstance(kf, UnscentedKalmanFilter):
+                kf.Q = noise
+                kf.predict(dt=dt, fx=_transition_apply, transition=transition)
+            else:
+                kf.F, kf.Q = transition, noise
+                kf.predict()
+            prediction = self._model.predict(kf.x, block, k)
+            jacobian = prediction.jacobian[None, :]
+            variance = prediction.variance_nm2
+            if isinstance(kf, UnscentedKalmanFilter):
+                kf.update(z, R=np.array([[variance]]), hx=self._hx(block, k))
+            else:
+                kf.update(
+                    z,
+                    HJacobian=_constant(jacobian),
+                    Hx=_constant(np.array([prediction.motor_torque_nm])),
+                    R=np.array([[variance]]),
+                )
+            innovation = float(kf.y[0])
+            spread = float(kf.S[0, 0])
+            nis[k] = innovation**2 / spread
+            log_likelihood[k] = -0.5 * (nis[k] + math.log(2.0 * math.pi * spread))
+        gated = min(nis.values()) > self._params.filter.gate_nis
+        for k, kf in self.filters.items():
+            if gated:  # no hypothesis explains the block: keep the predicted states
+                kf.x, kf.P = kf.x_prior.copy(), kf.P_prior.copy()
+            kf.P = self._safe_covariance(kf.P)
+            predictions[k] = self._model.predict(kf.x, block, k)
+        if block.direction and not gated:
+            for k in self.filters:
+                self.log_prob[k] += log_likelihood[k]
+        self._normalise()
+        if self._prune:
+            self._drop_unlikely()
+        return StepResult(predictions=predictions, nis=nis, gated=gated)
+
+    def _hx(self, block: Block, jammed: int) -> Any:
+        def hx(x: FloatArray) -> FloatArray:
+            return np.array([self._model.predict(x, block, jammed).motor_torque_nm])
+
+        return hx
+
+    def _safe_covariance(self, p: FloatArray) -> FloatArray:
+        """Symmetric, variances at least the floor, positive definite."""
+        p = 0.5 * (p + p.T)
+        diagonal = np.diagonal(p)
+        if np.any(diagonal < self._floor):
+            p = p + np.diag(np.maximum(self._floor - diagonal, 0.0))
+        try:
+            np.linalg.cholesky(p)
+        except np.linalg.LinAlgError:
+            p = repair_covariance(p, self._floor)
+        return p
+
+    def _normalise(self) -> None:
+        total = float(np.logaddexp.reduce(list(self.log_prob.values())))
+        for k in self.log_prob:
+            self.log_prob[k] -= total
+
+    def _drop_unlikely(self) -> None:
+        """Prune hypotheses below the probability floor (never the most likely one)."""
+        floor = math.log(max(self._params.filter.min_hypothesis_probability, 1e-300))
+        best = max(self.log_prob, key=self.log_prob.__getitem__)
+        for k in [k for k, value in self.log_prob.items() if value < floor and k != best]:
+            del self.filters[k], self.log_prob[k]
+        self._normalise()
+
+    def reinitialise_load(self) -> None:
+        """Forget the load and its rate (after a time reset, a gap or a divergence)."""
+        for kf in self.filters.values():
+            p = kf.P.copy()
+            for i in (LOAD, LOAD_RATE):
+                p[i, :] = 0.0
+                p[:, i] = 0.0
+                p[i, i] = self._initial_var[i]
+            kf.P = p
+
+
+def _constant(value: FloatArray) -> Any:
+    def function(_x: FloatArray) -> FloatArray:
+        return value
+
+    return function
+
+
+def _transition_apply(x: FloatArray, dt: float, transition: FloatArray | None = None) -> FloatArray:
+    """Process function of the UKF: x -> F x (the same linear model as the EKF's)."""
+    if transition is None:
+        return x
+    return np.asarray(transition @ x, dtype=np.float64)

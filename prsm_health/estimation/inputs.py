@@ -1,0 +1,338 @@
+"""From raw motor samples to validated, averaged blocks: the estimator's input stage.
+
+Every sample is checked and either accepted or rejected with a reason that is counted (never
+silently dropped): non-finite values, values out of the drive's range, a time stamp not after
+the last accepted one, an isolated spike in the current, or a current stuck at one value.
+Accepted samples are grouped into blocks of ``filter.block_duration_s`` on a fixed time grid;
+each block becomes one filter measurement (:class:`Block`). Everything is vectorised over the
+samples of a chunk; only chunks with time going backwards take a per-sample path.
+
+Time handling: a stamp that does not advance is rejected (TIME_BACKWARDS). If the stamps keep
+coming from a jumped-back clock for ``filter.time_reset_after_s`` of their own time, the new
+time line is accepted and the next block carries ``time_reset``. A gap longer than
+``filter.max_gap_s`` between accepted samples starts a new block with ``after_gap``.
+"""
+
+from __future__ import annotations
+
+import enum
+import math
+from dataclasses import dataclass, field
+
+import numpy as np
+from numpy.typing import NDArray
+
+from prsm_health.estimation.params import EstimatorParams
+from prsm_health.physics.meshing import carrier_speed_rad_s
+from prsm_health.signals import MotorSamples
+
+FloatArray = NDArray[np.float64]
+BoolArray = NDArray[np.bool_]
+
+#: A current sample this many noise standard deviations away from both neighbours, which
+#: agree with each other, is a spike.
+SPIKE_SIGMAS = 12.0
+#: This many identical consecutive current samples (while the noise should vary them) are a
+#: stuck sensor; all of them are rejected.
+STUCK_RUN_SAMPLES = 20
+
+
+class RejectReason(enum.IntEnum):
+    """Why a sample was rejected (the counters of the input-health diagnostics)."""
+
+    NON_FINITE = 0
+    OUT_OF_RANGE = 1
+    TIME_BACKWARDS = 2
+    SPIKE = 3
+    STUCK = 4
+
+
+@dataclass
+class InputCounters:
+    """Samples accepted and rejected (by reason) since start, and time events."""
+
+    accepted: int = 0
+    rejected: list[int] = field(default_factory=lambda: [0] * len(RejectReason))
+    time_resets: int = 0
+    gaps: int = 0
+
+    @property
+    def rejected_total(self) -> int:
+        """All rejected samples."""
+        return sum(self.rejected)
+
+
+@dataclass(frozen=True)
+class Block:
+    """One filter measurement: the accepted samples of one time-grid cell, averaged.
+
+    stamp_s: mean stamp. duration_s: time since the previous block's mean stamp (the filter's
+    prediction step, across a gap too; the grid period for the first block of a time line).
+    motor_torque_nm: k_t times the mean current. motor_speed_rad_s, motor_acceleration_rad_s2:
+    mean speed and its least squares slope over the block. carrier_cos, carrier_sin: means of
+    cos and sin of the carrier angle (exact averaging of the carrier-frequency ripple).
+    direction: +1 or -1 when every sample moves that way faster than the standstill speed,
+    else 0 (standstill or reversing). after_gap, time_reset: the block starts a new time line.
+    """
+
+    stamp_s: float
+    duration_s: float
+    samples: int
+    motor_torque_nm: float
+    motor_speed_rad_s: float
+    motor_acceleration_rad_s2: float
+    carrier_cos: float
+    carrier_sin: float
+    direction: int
+    after_gap: bool = False
+    time_reset: bool = False
+
+
+def merge_blocks(blocks: list[Block]) -> Block:
+    """One block standing for consecutive blocks (sample-weighted means; for standstill)."""
+    weights = np.array([b.samples for b in blocks], dtype=np.float64)
+
+    def mean(name: str) -> float:
+        return float(np.dot(weights, [getattr(b, name) for b in blocks]) / weights.sum())
+
+    directions = {b.direction for b in blocks}
+    return Block(
+        stamp_s=mean("stamp_s"),
+        duration_s=blocks[-1].stamp_s - blocks[0].stamp_s + blocks[0].duration_s,
+        samples=int(weights.sum()),
+        motor_torque_nm=mean("motor_torque_nm"),
+        motor_speed_rad_s=mean("motor_speed_rad_s"),
+        motor_acceleration_rad_s2=mean("motor_acceleration_rad_s2"),
+        carrier_cos=mean("carrier_cos"),
+        carrier_sin=mean("carrier_sin"),
+        direction=directions.pop() if len(directions) == 1 else 0,
+        after_gap=blocks[0].after_gap,
+        time_reset=blocks[0].time_reset,
+    )
+
+
+class SampleBlocker:
+    """Validates samples and groups them into :class:`Block`s (stateful across chunks).
+
+    The result does not depend on how the samples are chunked (one at a time in the node,
+    thousands at a time in replay): per-sample checks carry their state, and the checks that
+    need neighbours (spikes, stuck runs) run on complete blocks with one sample of context on
+    each side.
+    """
+
+    def __init__(self, params: EstimatorParams) -> None:
+        drive = params.actuator.drive_train
+        self._params = params
+        self._torque_constant = drive.torque_constant_nm_per_a
+        self._carrier_per_motor_rad = float(
+            carrier_speed_rad_s(params.actuator.preset.geometry, 1.0 / drive.gear_ratio)
+        )
+        self._max_current = drive.max_current_a
+        self._max_speed = params.max_motor_speed_rad_s
+        self._spike_a = SPIKE_SIGMAS * params.noise.current_std_a
+        self.counters = InputCounters()
+        self._last_stamp = -math.inf
+        self._backwards_since: float | None = None
+        self._pending = _empty()
+        self._anchor: float | None = None
+        self._last_block_stamp: float | None = None
+        self._time_reset = False
+        self._previous_current = math.nan  # last sample before the pending ones
+        self._stuck_run = 0  # length of the identical-current run ending there
+
+    def feed(self, samples: MotorSamples) -> list[Block]:
+        """Validate ``samples`` and return the blocks they complete (in time order)."""
+        ok = self._in_range(samples)
+        ok, resets = self._advance_time(samples.stamp_s, ok)
+        blocks: list[Block] = []
+        begin = 0
+        for reset in [*resets, len(samples)]:
+            part = samples[begin:reset]
+            accepted = part[ok[begin:reset]]
+            if reset < len(samples):  # the old time line ends here: close its blocks
+                blocks += self._blocks(
+                    MotorSamples.concatenate([self._pending, accepted]), final=True
+                )
+                self._anchor = None
+                self._time_reset = True
+            else:
+                blocks += self._blocks(
+                    MotorSamples.concatenate([self._pending, accepted]), final=False
+                )
+            begin = reset
+        return blocks
+
+    def flush(self) -> list[Block]:
+        """Blocks from the samples still pending (end of a bag)."""
+        return self._blocks(self._pending, final=True)
+
+    # --- per-sample checks --------------------------------------------------------------
+    def _count(self, reason: RejectReason, mask: BoolArray) -> None:
+        self.counters.rejected[reason] += int(np.count_nonzero(mask))
+
+    def _in_range(self, samples: MotorSamples) -> BoolArray:
+        """Finite and within the drive's current and speed range."""
+        values = np.stack(
+            [samples.stamp_s, samples.current_a, samples.speed_rad_s, samples.position_rad]
+        )
+        finite = np.isfinite(values).all(axis=0)
+        with np.errstate(invalid="ignore"):
+            in_range = (np.abs(samples.current_a) <= self._max_current) & (
+                np.abs(samples.speed_rad_s) <= self._max_speed
+            )
+        self._count(RejectReason.NON_FINITE, np.asarray(~finite))
+        self._count(RejectReason.OUT_OF_RANGE, np.asarray(finite & ~in_range))
+        return np.asarray(finite & in_range)
+
+    def _advance_time(self, stamps: FloatArray, ok: BoolArray) -> tuple[BoolArray, list[int]]:
+        """Reject stamps that do not advance; follow a jumped-back time line after a while.
+
+        Returns the accepted mask and the sample indices where a new time line starts.
+        """
+        index = np.flatnonzero(ok)
+        if len(index) == 0:
+            return ok, []
+        t = stamps[index]
+        if t[0] > self._last_stamp and bool(np.all(np.diff(t) > 0.0)):
+            self._last_stamp = float(t[-1])
+            self._backwards_since = None
+            return ok, []
+        keep = ok.copy()
+        resets = []
+        reset_after = self._params.filter.time_reset_after_s
+        for i, stamp in zip(index.tolist(), t.tolist(), strict=True):
+            if stamp > self._last_stamp:
+                self._last_stamp, self._backwards_since = stamp, None
+                continue
+            if self._backwards_since is None or stamp < self._backwards_since:
+                self._backwards_since = stamp
+            if stamp - self._backwards_since >= reset_after:
+                # The jumped-back time line has advanced on its own: follow it from here.
+                self._last_stamp, self._backwards_since = stamp, None
+                self.counters.time_resets += 1
+                resets.append(i)
+                continue
+            keep[i] = False
+            self.counters.rejected[RejectReason.TIME_BACKWARDS] += 1
+        return keep, resets
+
+    # --- checks on complete blocks ------------------------------------------------------
+    def _spikes_and_stuck(self, current: FloatArray, following: float) -> BoolArray:
+        """Rejection mask of ``current`` (consecutive accepted samples; ``following`` is the
+        next sample, NaN if none): isolated spikes, and stuck runs from their
+        STUCK_RUN_SAMPLES-th identical sample on."""
+        x = np.r_[self._previous_current, current, following]
+        before, here, after = x[:-2], x[1:-1], x[2:]
+        with np.errstate(invalid="ignore"):  # NaN context at the ends: never a spike
+            spikes = (
+                (np.abs(here - before) > self._spike_a)
+                & (np.abs(here - after) > self._spike_a)
+                & (np.abs(after - before) < 0.5 * self._spike_a)
+            )
+        same = here == before
+        run_ids = np.cumsum(~same)
+        first = np.flatnonzero(~same)
+        position = np.arange(len(here)) - np.r_[0, first][run_ids]
+        position = np.where(run_ids == 0, position + self._stuck_run, position)
+        stuck = position >= STUCK_RUN_SAMPLES - 1
+        self._stuck_run = int(position[-1]) + 1 if len(here) else self._stuck_run
+        self._previous_current = float(current[-1]) if len(current) else self._previous_current
+        self._count(RejectReason.SPIKE, spikes)
+        self._count(RejectReason.STUCK, stuck & ~spikes)
+        return np.asarray(spikes | stuck)
+
+    def _blocks(self, pending: MotorSamples, *, final: bool) -> list[Block]:
+        if len(pending) == 0:
+            self._pending = pending
+            return []
+        period = self._params.filter.block_duration_s
+        t = pending.stamp_s
+        gap_before = np.r_[False, np.diff(t) > self._params.filter.max_gap_s]
+        if self._anchor is None:
+            self._anchor = float(t[0])
+        # A gap starts a new time grid anchored at the first sample after it.
+        anchors = np.where(gap_before, t, np.nan)
+        anchors[0] = self._anchor if not gap_before[0] else t[0]
+        anchors = np.maximum.accumulate(np.where(np.isnan(anchors), -np.inf, anchors))
+        line = np.cumsum(gap_before)
+        cells = np.floor((t - anchors) / period).astype(np.int64)
+        new_cell = np.r_[True, (cells[1:] != cells[:-1]) | (line[1:] != line[:-1])]
+        starts = np.flatnonzero(new_cell)
+        complete = len(starts) if final else len(starts) - 1
+        if complete == 0:
+            self._pending = pending
+            return []
+        end = int(starts[complete]) if complete < len(starts) else len(t)
+        self._anchor = float(anchors[end - 1])
+        following = float(pending.current_a[end]) if end < len(t) else math.nan
+        run = pending[:end]
+        rejected = self._spikes_and_stuck(run.current_a, following)
+        self.counters.accepted += end - int(np.count_nonzero(rejected))
+        self._pending = pending[end:]
+        keep = ~rejected
+        return self._summarise(
+            run[keep], np.cumsum(new_cell[:end])[keep] - 1, gap_before[:end][keep]
+        )
+
+    def _summarise(
+        self, run: MotorSamples, cell_ids: NDArray[np.int64], gap_before: BoolArray
+    ) -> list[Block]:
+        """Average each cell's samples into a Block (all cells vectorised)."""
+        if len(run) == 0:
+            return []
+        starts = np.flatnonzero(np.r_[True, cell_ids[1:] != cell_ids[:-1]])
+        counts = np.diff(np.r_[starts, len(run)])
+        t0 = run.stamp_s[starts]
+        t = run.stamp_s - np.repeat(t0, counts)
+        w = run.speed_rad_s
+        angle = run.position_rad * self._carrier_per_motor_rad
+
+        def means(x: FloatArray) -> FloatArray:
+            return np.asarray(np.add.reduceat(x, starts) / counts, dtype=np.float64)
+
+        mean_t, mean_w = means(t), means(w)
+        variance_t = means(t * t) - mean_t**2
+        covariance = means(t * w) - mean_t * mean_w
+        slope = np.divide(
+            covariance, variance_t, out=np.zeros_like(mean_t), where=variance_t > 1e-12
+        )
+        threshold = self._params.filter.standstill_speed_rad_s
+        direction = (np.minimum.reduceat(w, starts) > threshold).astype(np.int64) - (
+            np.maximum.reduceat(w, starts) < -threshold
+        ).astype(np.int64)
+        stamps = t0 + mean_t
+        torque = means(run.current_a) * self._torque_constant
+        cos_mean, sin_mean = means(np.cos(angle)), means(np.sin(angle))
+        new_line = np.add.reduceat(gap_before.astype(np.int64), starts) > 0
+        self.counters.gaps += int(np.count_nonzero(new_line))
+        period = self._params.filter.block_duration_s
+        blocks = []
+        for b in range(len(starts)):
+            previous = self._last_block_stamp
+            reset = self._time_reset
+            duration = period
+            if previous is not None and not reset:
+                duration = float(stamps[b]) - previous
+            blocks.append(
+                Block(
+                    stamp_s=float(stamps[b]),
+                    duration_s=duration,
+                    samples=int(counts[b]),
+                    motor_torque_nm=float(torque[b]),
+                    motor_speed_rad_s=float(mean_w[b]),
+                    motor_acceleration_rad_s2=float(slope[b]),
+                    carrier_cos=float(cos_mean[b]),
+                    carrier_sin=float(sin_mean[b]),
+                    direction=int(direction[b]),
+                    after_gap=bool(new_line[b]),
+                    time_reset=reset,
+                )
+            )
+            self._last_block_stamp = float(stamps[b])
+            self._time_reset = False
+        return blocks
+
+
+def _empty() -> MotorSamples:
+    empty = np.zeros(0)
+    return MotorSamples(empty, empty, empty, empty)

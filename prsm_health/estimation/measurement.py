@@ -1,0 +1,155 @@
+"""The measurement model: the motor torque a block should show, given the state and a jam count.
+
+State x = [F, dF/dt] or, with the ripple terms, [F, dF/dt, c, s]: the signed axial load F
+(> 0 resists positive rotation) and its rate, and the carrier-harmonic torque c cos(theta) +
+s sin(theta) of the jammed rollers (theta the carrier angle from the motor position). With k
+jammed rollers, a block moving in direction d = +-1 at screw speed w:
+
+    T_screw = F L / 2 pi + d (M_k(|F|, |w|) + c <cos theta> + s <sin theta>)       (002 eq. 19)
+    T_motor = J_total alpha + (T_screw + d (1 - eta_g)/eta_g |T_screw|) / G    (actuator.py)
+
+with M_k of :mod:`prsm_health.estimation.surrogate` and <.> the block means. At standstill
+(d = 0) friction can hold anything between -M_static and +M_static (stiction), so T_screw =
+F L / 2 pi + u with u uniform on that band: its variance M_static^2 / 3 joins the measurement
+noise and the block carries no evidence about jams (docs/estimation.md).
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+import numpy as np
+from numpy.typing import NDArray
+
+from prsm_health.estimation.inputs import Block
+from prsm_health.estimation.params import EstimatorParams
+from prsm_health.estimation.surrogate import (
+    DAMAGE,
+    ROLLING,
+    SLIDING,
+    VISCOUS,
+    VISCOUS_SPEED_EXPONENT,
+    WEAR_HEALTHY,
+    WEAR_JAMMED,
+    AverageModel,
+    DirectPhysics,
+    averaged_tables,
+)
+from prsm_health.physics.load_distribution import LoadingCase
+
+FloatArray = NDArray[np.float64]
+
+LOAD, LOAD_RATE, RIPPLE_COS, RIPPLE_SIN = range(4)
+
+
+@dataclass(frozen=True)
+class Prediction:
+    """What hypothesis k predicts for one block at state x.
+
+    motor_torque_nm and jacobian (d/dx, one row) of the measurement; variance_nm2 of the
+    measurement noise (sensors, model error, stiction band); friction_torque_nm (magnitude;
+    the breakaway band at standstill); precision_loss_rate_m_per_s and fatigue_rate_per_s,
+    with their derivatives d/d|F|.
+    """
+
+    motor_torque_nm: float
+    jacobian: FloatArray
+    variance_nm2: float
+    friction_torque_nm: float
+    precision_loss_rate_m_per_s: float
+    precision_loss_rate_slope: float
+    fatigue_rate_per_s: float
+    fatigue_rate_slope: float
+
+
+class TorqueModel:
+    """Measurement model of every jam hypothesis (see the module docstring)."""
+
+    def __init__(self, params: EstimatorParams) -> None:
+        actuator = params.actuator
+        preset = actuator.preset
+        drive = actuator.drive_train
+        self.n_rollers = preset.geometry.n_rollers
+        self.dim = 4 if params.radial_terms else 2
+        self._load_arm_m = preset.geometry.lead_m / (2.0 * math.pi)
+        self._gear_ratio = drive.gear_ratio
+        self._gear_loss = (1.0 - drive.gear_efficiency) / drive.gear_efficiency
+        self._inertia = drive.inertia_at_motor_kg_m2
+        self._wear_scale = actuator.wear_acceleration
+        self._actuator = actuator
+        noise = params.noise
+        self._current_var = (drive.torque_constant_nm_per_a * noise.current_std_a) ** 2
+        self._accel_var_per_sample = (
+            12.0 * noise.speed_std_rad_s**2 / params.filter.block_duration_s**2
+        )
+        self._model_rel = noise.model_error_rel
+        self._model_floor_var = noise.model_error_floor_nm**2
+        ratio = params.model.radial_load_ratio if params.radial_terms else 0.0
+        self._models: dict[LoadingCase, AverageModel] = {}
+        for case in LoadingCase:
+            if params.fidelity.surrogate:
+                self._models[case] = averaged_tables(preset, actuator.misalignment, ratio, case)
+            else:
+                self._models[case] = DirectPhysics(preset, actuator.misalignment, ratio, case)
+
+    def load_torque_arm_m(self) -> float:
+        """L / 2 pi: screw torque per newton of axial load."""
+        return self._load_arm_m
+
+    def predict(self, x: FloatArray, block: Block, jammed: int) -> Prediction:
+        """The measurement of ``block`` under ``jammed`` rollers at state ``x``."""
+        load = float(x[LOAD])
+        direction = block.direction
+        case = self._actuator.loading_case(block.motor_speed_rad_s)
+        value, slope = self._models[case].evaluate(load)
+        healthy = self.n_rollers - jammed
+        screw_speed = abs(block.motor_speed_rad_s) / self._gear_ratio
+        jacobian = np.zeros(self.dim)
+        static = healthy * value[ROLLING] + jammed * value[SLIDING]
+        if direction:
+            speed_factor = screw_speed**VISCOUS_SPEED_EXPONENT
+            friction = static + healthy * value[VISCOUS] * speed_factor
+            friction_slope = (
+                healthy * (slope[ROLLING] + slope[VISCOUS] * speed_factor) + jammed * slope[SLIDING]
+            )
+            screw_torque = load * self._load_arm_m + direction * friction
+            d_screw_d_load = self._load_arm_m + direction * math.copysign(friction_slope, load)
+            band_var = 0.0
+            if self.dim == 4 and jammed:
+                ripple = x[RIPPLE_COS] * block.carrier_cos + x[RIPPLE_SIN] * block.carrier_sin
+                screw_torque += direction * float(ripple)
+                jacobian[RIPPLE_COS] = direction * block.carrier_cos
+                jacobian[RIPPLE_SIN] = direction * block.carrier_sin
+        else:
+            friction = static
+            screw_torque = load * self._load_arm_m
+            d_screw_d_load = self._load_arm_m
+            band_var = static**2 / 3.0
+        gear = (
+            1.0 + direction * self._gear_loss * math.copysign(1.0, screw_torque)
+        ) / self._gear_ratio
+        motor_torque = self._inertia * block.motor_acceleration_rad_s2 + gear * screw_torque
+        jacobian[LOAD] = gear * d_screw_d_load
+        jacobian[RIPPLE_COS:] *= gear
+        variance = (
+            self._current_var / block.samples
+            + self._inertia**2 * self._accel_var_per_sample / block.samples
+            + (self._model_rel * motor_torque) ** 2
+            + self._model_floor_var
+            + gear**2 * band_var
+        )
+        wear_per_rad = healthy * value[WEAR_HEALTHY] + jammed * value[WEAR_JAMMED]
+        wear_slope = healthy * slope[WEAR_HEALTHY] + jammed * slope[WEAR_JAMMED]
+        wear_speed = screw_speed * self._wear_scale if direction else 0.0
+        fatigue_speed = screw_speed if direction else 0.0
+        return Prediction(
+            motor_torque_nm=motor_torque,
+            jacobian=jacobian,
+            variance_nm2=variance,
+            friction_torque_nm=friction,
+            precision_loss_rate_m_per_s=wear_speed * wear_per_rad,
+            precision_loss_rate_slope=wear_speed * wear_slope,
+            fatigue_rate_per_s=fatigue_speed * value[DAMAGE],
+            fatigue_rate_slope=fatigue_speed * slope[DAMAGE],
+        )

@@ -1,0 +1,334 @@
+"""The estimator's configuration: one validated object, loaded from YAML.
+
+The same parameters serve offline replay, the ROS node and the benchmark. A params file::
+
+    actuator:            # see prsm_health.actuator.actuator_from_mapping
+      preset: dong2022-downhole
+    noise: {...}         # NoiseParams
+    model: {...}         # ModelParams
+    filter: {...}        # FilterParams
+    fidelity: {...}      # Fidelity (the named skips)
+    diagnostics: {...}   # DiagnosticThresholds
+
+Every section and key is optional except ``actuator.preset``; unknown keys are refused with
+their dotted name. Units are SI except where the name says otherwise.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, field, fields
+from pathlib import Path
+from typing import Any, Literal
+
+from prsm_health.actuator import Actuator, actuator_from_mapping
+from prsm_health.config import build_dataclass
+from prsm_health.physics.errors import ParameterError
+from prsm_health.physics.geometry import require
+from prsm_health.yamlio import YamlError, load_yaml_mapping
+
+
+def _require_ranges(obj: object, prefix: str, ranges: dict[str, tuple[float, float]]) -> None:
+    """Every named field is a finite number inside its closed range [low, high]."""
+    for f in fields(obj):  # type: ignore[arg-type]
+        if f.name not in ranges:
+            continue
+        value = getattr(obj, f.name)
+        low, high = ranges[f.name]
+        name = f"{prefix}.{f.name}"
+        require(
+            isinstance(value, int | float) and not isinstance(value, bool),
+            name,
+            f"must be a number, got {value!r}",
+        )
+        require(
+            math.isfinite(value) and low <= value <= high,
+            name,
+            f"must be in [{low:g}, {high:g}], got {value!r}",
+        )
+        object.__setattr__(obj, f.name, float(value))
+
+
+@dataclass(frozen=True, kw_only=True)
+class NoiseParams:
+    """What the sensors are like (the simulator's defaults; docs/scenes.md).
+
+    current_std_a: white noise of one current sample. speed_std_rad_s: of one motor speed
+    sample. model_error_rel: relative error of the torque model (surrogate, unmodelled
+    harmonics, radial load unknown), added to the measurement variance of each block.
+    model_error_floor_nm: absolute floor of that error, motor side.
+    """
+
+    current_std_a: float = 0.05
+    speed_std_rad_s: float = 0.2
+    model_error_rel: float = 0.01
+    model_error_floor_nm: float = 0.005
+
+    def __post_init__(self) -> None:
+        _require_ranges(
+            self,
+            "noise",
+            {
+                "current_std_a": (1e-6, 100.0),
+                "speed_std_rad_s": (1e-6, 1e3),
+                "model_error_rel": (0.0, 1.0),
+                "model_error_floor_nm": (1e-9, 1e3),
+            },
+        )
+
+
+@dataclass(frozen=True, kw_only=True)
+class ModelParams:
+    """Prior knowledge about the operation (docs/estimation.md explains each choice).
+
+    radial_load_ratio: typical F_r / F_a (0 = no radial load; the downhole robot's wall
+    contact gives about 0.15). radial_load_ratio_std: its uncertainty (enters the wear
+    rate's uncertainty). load_acceleration_psd_n2_per_s3: how fast the axial load's rate may
+    change: the white-noise density of its acceleration (the load model is a random walk on
+    dF/dt, so ramps are cheap and steps are not).
+    harmonic_random_walk_nm_per_sqrt_s: drift of the carrier-frequency torque ripple of jammed
+    rollers. harmonic_prior_std_nm: its size when a jam appears. jam_rate_per_h: prior rate of
+    a new jam. initial_jammed_rollers: jammed count known at start (after maintenance, 0).
+    wear_coefficient_sigma_ln: log-normal spread of the wear coefficient around the preset's.
+    """
+
+    radial_load_ratio: float = 0.15
+    radial_load_ratio_std: float = 0.1
+    load_acceleration_psd_n2_per_s3: float = 1.0e10
+    harmonic_random_walk_nm_per_sqrt_s: float = 0.5
+    harmonic_prior_std_nm: float = 5.0
+    jam_rate_per_h: float = 1e-3
+    initial_jammed_rollers: int = 0
+    wear_coefficient_sigma_ln: float = 0.5
+
+    def __post_init__(self) -> None:
+        _require_ranges(
+            self,
+            "model",
+            {
+                "radial_load_ratio": (0.0, 0.9),
+                "radial_load_ratio_std": (0.0, 1.0),
+                "load_acceleration_psd_n2_per_s3": (1e-3, 1e20),
+                "harmonic_random_walk_nm_per_sqrt_s": (1e-9, 1e4),
+                "harmonic_prior_std_nm": (1e-9, 1e4),
+                "jam_rate_per_h": (1e-12, 1e6),
+                "wear_coefficient_sigma_ln": (0.0, 5.0),
+            },
+        )
+        require(
+            isinstance(self.initial_jammed_rollers, int) and self.initial_jammed_rollers >= 0,
+            "model.initial_jammed_rollers",
+            f"must be an integer >= 0, got {self.initial_jammed_rollers!r}",
+        )
+
+
+@dataclass(frozen=True, kw_only=True)
+class FilterParams:
+    """How samples become filter updates, and the numerical-safety thresholds.
+
+    block_duration_s: samples are averaged over blocks of this duration (one filter update
+    each). standstill_speed_rad_s: motor speed below which a block is standstill.
+    max_gap_s: a longer gap between accepted samples, or time going backwards for longer than
+    time_reset_after_s, re-initialises the load (event TIME_RESET). gate_nis: a block whose
+    normalised innovation squared exceeds it in every active hypothesis is rejected as an
+    outlier. divergence_nis: mean NIS over divergence_window_s above it means the filter is
+    inconsistent; the load is re-initialised (event DIVERGENCE_RECOVERED).
+    min_hypothesis_probability: below it a jam hypothesis is pruned (when pruning is on).
+    max_speed_rad_s: motor speeds beyond it are out of range (rejected). Default 0 means
+    three times the preset's largest speed.
+    """
+
+    block_duration_s: float = 0.04
+    standstill_speed_rad_s: float = 1.0
+    max_gap_s: float = 0.5
+    time_reset_after_s: float = 0.1
+    gate_nis: float = 36.0
+    divergence_nis: float = 12.0
+    divergence_window_s: float = 2.0
+    min_hypothesis_probability: float = 1e-9
+    max_speed_rad_s: float = 0.0
+
+    def __post_init__(self) -> None:
+        _require_ranges(
+            self,
+            "filter",
+            {
+                "block_duration_s": (1e-4, 10.0),
+                "standstill_speed_rad_s": (0.0, 1e3),
+                "max_gap_s": (1e-3, 1e6),
+                "time_reset_after_s": (0.0, 1e3),
+                "gate_nis": (1.0, 1e6),
+                "divergence_nis": (1.0, 1e6),
+                "divergence_window_s": (1e-3, 1e4),
+                "min_hypothesis_probability": (0.0, 0.1),
+                "max_speed_rad_s": (0.0, 1e5),
+            },
+        )
+
+
+FilterKind = Literal["ekf", "ukf"]
+
+
+@dataclass(frozen=True, kw_only=True)
+class Fidelity:
+    """The named skips and model choices (each one switchable for the benchmark).
+
+    surrogate: the physics through tables built once per geometry (False: the full physics
+    core at every evaluation, the naive reference). radial_terms: "auto" keeps the
+    carrier-harmonic ripple states only when a radial load or a misalignment is configured;
+    "on" always; "off" never. skip_standstill: no wear or fatigue integration and no jam
+    evidence at standstill. prune_hypotheses: drop ruled-out jam counts and keep only the
+    next possible jam above the plausible ones. merge_standstill_blocks: one filter update
+    per standstill_block_s instead of per block while nothing moves. filter: "ekf" or "ukf".
+    """
+
+    surrogate: bool = True
+    radial_terms: Literal["auto", "on", "off"] = "auto"
+    skip_standstill: bool = True
+    prune_hypotheses: bool = True
+    merge_standstill_blocks: bool = True
+    standstill_block_s: float = 0.5
+    filter: FilterKind = "ekf"
+
+    def __post_init__(self) -> None:
+        for name in ("surrogate", "skip_standstill", "prune_hypotheses", "merge_standstill_blocks"):
+            require(isinstance(getattr(self, name), bool), f"fidelity.{name}", "must be a bool")
+        require(
+            self.radial_terms in ("auto", "on", "off"),
+            "fidelity.radial_terms",
+            f"must be auto, on or off, got {self.radial_terms!r}",
+        )
+        require(
+            self.filter in ("ekf", "ukf"),
+            "fidelity.filter",
+            f"must be ekf or ukf, got {self.filter!r}",
+        )
+        _require_ranges(self, "fidelity", {"standstill_block_s": (1e-3, 60.0)})
+
+
+@dataclass(frozen=True, kw_only=True)
+class DiagnosticThresholds:
+    """Levels of the diagnostics (OK / WARN / ERROR) and input health limits.
+
+    rated_load_n: 0 means the preset's largest paper load. load_warn/error_fraction: of the
+    rated load. jam_warn_probability: P(at least one jammed roller) that raises WARN; a most
+    likely count >= 1 is ERROR. precision_loss_budget_um: the allowed loss; warn/error
+    fractions of it. fatigue_warn/error_damage: Miner damage levels. stale_timeout_s: inputs
+    older than this make every status STALE. min_input_rate_hz: below it, input health WARN.
+    rejected_warn_fraction: share of rejected samples (last second) that raises WARN.
+    """
+
+    rated_load_n: float = 0.0
+    load_warn_fraction: float = 0.9
+    load_error_fraction: float = 1.1
+    jam_warn_probability: float = 0.2
+    precision_loss_budget_um: float = 50.0
+    precision_loss_warn_fraction: float = 0.7
+    precision_loss_error_fraction: float = 1.0
+    fatigue_warn_damage: float = 0.5
+    fatigue_error_damage: float = 0.9
+    stale_timeout_s: float = 1.0
+    min_input_rate_hz: float = 100.0
+    rejected_warn_fraction: float = 0.05
+
+    def __post_init__(self) -> None:
+        _require_ranges(
+            self,
+            "diagnostics",
+            {
+                "rated_load_n": (0.0, 1e9),
+                "load_warn_fraction": (0.0, 10.0),
+                "load_error_fraction": (0.0, 10.0),
+                "jam_warn_probability": (0.0, 1.0),
+                "precision_loss_budget_um": (1e-6, 1e6),
+                "precision_loss_warn_fraction": (0.0, 10.0),
+                "precision_loss_error_fraction": (0.0, 10.0),
+                "fatigue_warn_damage": (0.0, 10.0),
+                "fatigue_error_damage": (0.0, 10.0),
+                "stale_timeout_s": (1e-3, 1e4),
+                "min_input_rate_hz": (0.0, 1e6),
+                "rejected_warn_fraction": (0.0, 1.0),
+            },
+        )
+        for low, high in (
+            ("load_warn_fraction", "load_error_fraction"),
+            ("precision_loss_warn_fraction", "precision_loss_error_fraction"),
+            ("fatigue_warn_damage", "fatigue_error_damage"),
+        ):
+            require(
+                getattr(self, low) <= getattr(self, high),
+                f"diagnostics.{low}",
+                f"must not exceed diagnostics.{high}",
+            )
+
+
+@dataclass(frozen=True, kw_only=True)
+class EstimatorParams:
+    """Everything the estimator needs: the actuator and the sections above."""
+
+    actuator: Actuator
+    noise: NoiseParams = field(default_factory=NoiseParams)
+    model: ModelParams = field(default_factory=ModelParams)
+    filter: FilterParams = field(default_factory=FilterParams)
+    fidelity: Fidelity = field(default_factory=Fidelity)
+    diagnostics: DiagnosticThresholds = field(default_factory=DiagnosticThresholds)
+
+    def __post_init__(self) -> None:
+        n_rollers = self.actuator.preset.geometry.n_rollers
+        require(
+            self.model.initial_jammed_rollers <= n_rollers,
+            "model.initial_jammed_rollers",
+            f"must be <= n_rollers = {n_rollers}",
+        )
+
+    @property
+    def rated_load_n(self) -> float:
+        """The load the diagnostics compare against (the preset's largest by default)."""
+        rated = self.diagnostics.rated_load_n
+        return rated if rated > 0.0 else self.actuator.preset.largest_axial_load_n
+
+    @property
+    def max_motor_speed_rad_s(self) -> float:
+        """Largest plausible motor speed; faster samples are rejected as out of range."""
+        if self.filter.max_speed_rad_s > 0.0:
+            return self.filter.max_speed_rad_s
+        screw = self.actuator.preset.largest_speed_rpm * 2.0 * math.pi / 60.0
+        return 3.0 * screw * self.actuator.drive_train.gear_ratio
+
+    @property
+    def radial_terms(self) -> bool:
+        """Whether the carrier-harmonic ripple states are part of the filter."""
+        mode = self.fidelity.radial_terms
+        if mode == "auto":
+            return self.model.radial_load_ratio > 0.0 or not self.actuator.misalignment.is_aligned
+        return mode == "on"
+
+
+_SECTIONS: dict[str, type[Any]] = {
+    "noise": NoiseParams,
+    "model": ModelParams,
+    "filter": FilterParams,
+    "fidelity": Fidelity,
+    "diagnostics": DiagnosticThresholds,
+}
+
+
+def params_from_mapping(data: dict[str, Any]) -> EstimatorParams:
+    """Validate a parsed params document (see the module docstring)."""
+    unknown = sorted(set(data) - {"actuator", *_SECTIONS})
+    if unknown:
+        raise ParameterError(
+            unknown[0], f"unknown section; allowed: actuator, {', '.join(_SECTIONS)}"
+        )
+    if "actuator" not in data:
+        raise ParameterError("actuator", "missing (at least actuator.preset is required)")
+    sections = {name: build_dataclass(cls, data.get(name), name) for name, cls in _SECTIONS.items()}
+    return EstimatorParams(actuator=actuator_from_mapping(data["actuator"]), **sections)
+
+
+def load_params(path: Path) -> EstimatorParams:
+    """Load a params YAML file; errors name the file or the bad key."""
+    try:
+        return params_from_mapping(load_yaml_mapping(path))
+    except YamlError as exc:
+        raise ParameterError("params", str(exc)) from exc

@@ -1,0 +1,228 @@
+"""The physics the filter needs, averaged over the carrier angle, and its cached tables.
+
+Inside the filter the PRSM is described per roller and averaged over the roller's position
+angle, because which roller jams and the carrier phase are unknown; the angle-dependent part
+of a jammed roller's torque is the carrier-harmonic ripple, which the filter estimates as
+states of its own (docs/estimation.md). With k of N rollers jammed (paper 002 eq. 12-18, per
+roller):
+
+    M_k(F, w)    = (N - k) (rolling(F) + viscous(F) |w|^0.66) + k sliding(F)
+    dh/dt_k(F, w) = |w| ((N - k) wear_healthy(F) + k wear_jammed(F))
+    dD/dt(F, w)  = |w| damage(F)
+
+with F the axial load magnitude and w the screw speed. ``rolling`` is hysteresis + spin +
+differential sliding (002 eq. 2-4), ``viscous`` the lubricant term at 1 rad/s (eq. 5-11,
+the only speed-dependent one, exponent 0.66 of eq. 5), ``sliding`` a jammed roller's Coulomb
+sliding (eq. 15-16), the wear rates per radian of screw rotation (001 eq. 30-38 / 004
+eq. 32-35 with the healthy and the jammed slip speed), and ``damage`` the Miner damage per
+radian (000 eq. 29). The load distribution does not depend on which rollers are jammed.
+
+:func:`physics_averages` computes these from the physics core (the reference, and the
+"full physics" of the naive configuration); :class:`AveragedTables` tabulates them once per
+(preset, misalignment, radial ratio, case) over the load, interpolated in log-log (every term
+is close to a power law of the load), with the error against the physics core measured in
+the tests.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, fields
+from functools import cache
+from typing import Protocol
+
+import numpy as np
+from numpy.typing import ArrayLike, NDArray
+
+from prsm_health.physics.fatigue import damage_rate_per_s
+from prsm_health.physics.friction import friction_torque
+from prsm_health.physics.geometry import Misalignment
+from prsm_health.physics.load_distribution import (
+    NEGLIGIBLE_LOAD_N,
+    LoadingCase,
+    solve_load_distribution,
+)
+from prsm_health.physics.meshing import meshing, slip_speed_m_s
+from prsm_health.physics.presets import Preset
+from prsm_health.physics.wear import wear_depth_rate_m_per_s
+
+FloatArray = NDArray[np.float64]
+
+#: Exponent of the screw speed in the viscous torque (paper 002 eq. 5, U^0.66).
+VISCOUS_SPEED_EXPONENT = 0.66
+
+
+@dataclass(frozen=True)
+class RollerAverages:
+    """Per-roller physics averaged over the carrier angle, one entry per axial load.
+
+    rolling_nm: hysteresis + spin + differential torque of one healthy roller [N m].
+    viscous_nm: viscous torque of one healthy roller at |w_s| = 1 rad/s [N m].
+    sliding_nm: sliding torque of one jammed roller [N m].
+    wear_healthy_m, wear_jammed_m: precision loss per radian of screw rotation contributed by
+    one roller, healthy or jammed [m/rad]. damage: Miner damage of the PRSM per radian [1/rad].
+    """
+
+    rolling_nm: FloatArray
+    viscous_nm: FloatArray
+    sliding_nm: FloatArray
+    wear_healthy_m: FloatArray
+    wear_jammed_m: FloatArray
+    damage: FloatArray
+
+
+def physics_averages(
+    preset: Preset,
+    axial_load_n: ArrayLike,
+    *,
+    radial_ratio: float = 0.0,
+    case: LoadingCase = LoadingCase.SCREW_TENSION_NUT_COMPRESSION,
+    misalignment: Misalignment | None = None,
+    angles: int = 4,
+) -> RollerAverages:
+    """:class:`RollerAverages` from the physics core for each axial load (1-D array).
+
+    The average is over the N rollers at ``angles`` carrier angles in [0, 2 pi / N), i.e. over
+    N * angles evenly spaced roller position angles (exact for harmonics below that number).
+    """
+    geometry = preset.geometry
+    misalignment = misalignment or Misalignment()
+    loads = np.atleast_1d(np.asarray(axial_load_n, dtype=np.float64))
+    theta = 2.0 * math.pi * np.arange(angles) / (angles * geometry.n_rollers)
+    meshes = [meshing(geometry, misalignment, carrier_angle_rad=float(t)) for t in theta]
+    # The clearances turn with the carrier, so each angle is one batched solve over the loads.
+    solved = [
+        solve_load_distribution(
+            geometry,
+            loads,
+            radial_load_n=radial_ratio * loads,
+            carrier_angle_rad=float(t),
+            clearance_screw_roller_m=mesh.axial_clearance_screw_roller_m,
+            clearance_roller_nut_m=mesh.axial_clearance_roller_nut_m,
+            case=case,
+        )
+        for t, mesh in zip(theta, meshes, strict=True)
+    ]
+    q_sr = np.stack([s.screw_roller_n for s in solved], axis=1)  # (loads, angles, N, Z)
+    q_rn = np.stack([s.roller_nut_n for s in solved], axis=1)
+    healthy = friction_torque(geometry, preset.friction, q_sr, q_rn, 1.0)
+    jammed = friction_torque(geometry, preset.friction, q_sr, q_rn, 1.0, jammed=geometry.n_rollers)
+    mesh = meshes[0]  # the slip speed uses the aligned contact point, the same at every angle
+    wear = [
+        wear_depth_rate_m_per_s(
+            geometry,
+            preset.wear,
+            q_sr,
+            np.asarray(slip_speed_m_s(geometry, mesh, 1.0, jammed=is_jammed))[..., None, None],
+        ).sum(axis=-1)
+        for is_jammed in (False, True)
+    ]
+    damage = damage_rate_per_s(geometry, preset.fatigue, q_sr, 1.0)
+
+    def mean(per_roller: FloatArray) -> FloatArray:
+        return np.asarray(per_roller.mean(axis=(1, 2)), dtype=np.float64)
+
+    return RollerAverages(
+        rolling_nm=mean(healthy.hysteresis_nm + healthy.spin_nm + healthy.differential_nm),
+        viscous_nm=mean(healthy.viscous_nm),
+        sliding_nm=mean(jammed.jammed_sliding_nm),
+        wear_healthy_m=mean(wear[0]),
+        wear_jammed_m=mean(wear[1]),
+        damage=np.asarray(damage.mean(axis=1), dtype=np.float64),
+    )
+
+
+#: Order of the quantities in the value vectors of :class:`AverageModel`.
+QUANTITIES = tuple(f.name for f in fields(RollerAverages))
+ROLLING, VISCOUS, SLIDING, WEAR_HEALTHY, WEAR_JAMMED, DAMAGE = range(len(QUANTITIES))
+
+#: Table grid: loads from this fraction of the preset's largest load ...
+TABLE_MIN_FRACTION = 1e-3
+#: ... to this multiple of it, log-spaced.
+TABLE_MAX_FRACTION = 3.0
+TABLE_POINTS = 48
+#: Relative step of the finite-difference derivative of the direct physics.
+_DIFFERENCE_STEP = 1e-4
+
+
+class AverageModel(Protocol):
+    """The averaged physics at one load: values and d/dF, ordered as :data:`QUANTITIES`."""
+
+    def evaluate(self, axial_load_n: float) -> tuple[FloatArray, FloatArray]:
+        """Values and their derivatives with respect to the load magnitude |F|."""
+
+
+@dataclass(frozen=True, eq=False)
+class AveragedTables:
+    """:class:`RollerAverages` tabulated over the load for one configuration (the surrogate).
+
+    Each quantity is stored as its log (floored at 1e-300 so an unloaded term stays finite)
+    on a log-spaced load grid; :meth:`evaluate` interpolates linearly in log-log, extends the
+    end intervals as power laws outside the grid, and is exactly zero at F = 0.
+    """
+
+    log_load: FloatArray
+    log_values: FloatArray  # (quantities, loads)
+    slopes: FloatArray  # d log(value) / d log(load) per interval, (quantities, loads - 1)
+
+    def evaluate(self, axial_load_n: float) -> tuple[FloatArray, FloatArray]:
+        """Values and d/dF at the load magnitude |F| (scalar)."""
+        load = abs(axial_load_n)
+        if load < NEGLIGIBLE_LOAD_N:
+            zeros = np.zeros(len(QUANTITIES))
+            return zeros, zeros
+        x = math.log(load)
+        grid = self.log_load
+        index = min(max(int(np.searchsorted(grid, x)) - 1, 0), len(grid) - 2)
+        slope = self.slopes[:, index]
+        value = np.exp(self.log_values[:, index] + slope * (x - grid[index]))
+        return value, value * slope / load
+
+
+@cache
+def averaged_tables(
+    preset: Preset,
+    misalignment: Misalignment,
+    radial_ratio: float,
+    case: LoadingCase,
+) -> AveragedTables:
+    """Build (once per configuration) the load table of :func:`physics_averages`."""
+    largest = preset.largest_axial_load_n
+    loads = np.geomspace(TABLE_MIN_FRACTION * largest, TABLE_MAX_FRACTION * largest, TABLE_POINTS)
+    averages = physics_averages(
+        preset, loads, radial_ratio=radial_ratio, case=case, misalignment=misalignment
+    )
+    values = np.stack([getattr(averages, name) for name in QUANTITIES])
+    log_values = np.log(np.maximum(values, 1e-300))
+    log_load = np.log(loads)
+    slopes = np.diff(log_values, axis=1) / np.diff(log_load)
+    return AveragedTables(log_load=log_load, log_values=log_values, slopes=slopes)
+
+
+@dataclass(frozen=True, eq=False)
+class DirectPhysics:
+    """The physics core itself at every evaluation (the naive reference configuration).
+
+    One carrier angle per evaluation (the N rollers sample N position angles), the
+    derivative by a forward difference: two load-distribution solves per call.
+    """
+
+    preset: Preset
+    misalignment: Misalignment
+    radial_ratio: float
+    case: LoadingCase
+
+    def evaluate(self, axial_load_n: float) -> tuple[FloatArray, FloatArray]:
+        """Values and d/dF at the load magnitude |F| (scalar), from the physics core."""
+        load = abs(axial_load_n)
+        step = max(load, NEGLIGIBLE_LOAD_N) * _DIFFERENCE_STEP
+        averages = physics_averages(
+            self.preset,
+            [load, load + step],
+            radial_ratio=self.radial_ratio,
+            case=self.case,
+            misalignment=self.misalignment,
+            angles=1,
+        )
+        values = np.stack([getattr(averages, name) for name in QUANTITIES])
+        return values[:, 0], (values[:, 1] - values[:, 0]) / step

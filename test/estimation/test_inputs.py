@@ -1,0 +1,158 @@
+"""The input stage: validation, counting, time handling and blocks, whatever the chunking."""
+
+from __future__ import annotations
+
+import dataclasses
+import itertools
+import math
+
+import numpy as np
+import pytest
+
+from prsm_health.actuator import Actuator
+from prsm_health.estimation.inputs import (
+    STUCK_RUN_SAMPLES,
+    Block,
+    RejectReason,
+    SampleBlocker,
+)
+from prsm_health.estimation.params import EstimatorParams
+from prsm_health.physics.meshing import carrier_speed_rad_s
+from prsm_health.physics.presets import load_preset
+from prsm_health.signals import MotorSamples
+
+PARAMS = EstimatorParams(actuator=Actuator(preset=load_preset("dong2022-downhole")))
+RATE_HZ = 1000.0
+
+
+def run(seconds: float = 2.0, seed: int = 0) -> MotorSamples:
+    """A noisy 1 kHz run at constant speed and current."""
+    rng = np.random.default_rng(seed)
+    n = int(seconds * RATE_HZ)
+    t = np.arange(n) / RATE_HZ
+    return MotorSamples(
+        t + 0.1,
+        5.0 + rng.normal(0.0, 0.05, n),
+        150.0 + rng.normal(0.0, 0.2, n),
+        150.0 * t,
+    )
+
+
+def feed_in_chunks(samples: MotorSamples, size: int) -> tuple[list[Block], SampleBlocker]:
+    blocker = SampleBlocker(PARAMS)
+    blocks = []
+    for start in range(0, len(samples), size):
+        blocks += blocker.feed(samples[start : start + size])
+    return blocks + blocker.flush(), blocker
+
+
+def with_values(samples: MotorSamples, **changes: tuple[int, float]) -> MotorSamples:
+    """Copy of ``samples`` with single values replaced: field=(index, value)."""
+    arrays = {f.name: getattr(samples, f.name).copy() for f in dataclasses.fields(samples)}
+    for name, (index, value) in changes.items():
+        arrays[name][index] = value
+    return MotorSamples(**arrays)
+
+
+@pytest.mark.parametrize("size", [1, 7, 333])
+def test_blocks_do_not_depend_on_the_chunking(size: int) -> None:
+    samples = with_values(run(), current_a=(500, 40.0), speed_rad_s=(900, math.nan))
+    reference, ref_blocker = feed_in_chunks(samples, len(samples))
+    blocks, blocker = feed_in_chunks(samples, size)
+    assert blocks == reference
+    assert blocker.counters == ref_blocker.counters
+
+
+def test_blocks_average_the_samples_of_each_grid_cell() -> None:
+    samples = run(1.0)
+    blocks, blocker = feed_in_chunks(samples, 100)
+    per_block = int(PARAMS.filter.block_duration_s * RATE_HZ)
+    assert len(blocks) == len(samples) // per_block
+    first = samples[:per_block]
+    k_t = PARAMS.actuator.drive_train.torque_constant_nm_per_a
+    assert blocks[0].samples == per_block
+    assert blocks[0].motor_torque_nm == pytest.approx(k_t * first.current_a.mean(), rel=1e-12)
+    ratio = float(carrier_speed_rad_s(PARAMS.actuator.preset.geometry, 1.0))
+    angle = first.position_rad * ratio / PARAMS.actuator.drive_train.gear_ratio
+    assert blocks[0].carrier_cos == pytest.approx(np.cos(angle).mean(), rel=1e-12)
+    assert blocks[0].carrier_sin == pytest.approx(np.sin(angle).mean(), rel=1e-12)
+    assert all(b.direction == 1 for b in blocks)
+    assert blocks[1].duration_s == pytest.approx(blocks[1].stamp_s - blocks[0].stamp_s)
+    assert blocks[1].duration_s == pytest.approx(PARAMS.filter.block_duration_s, rel=0.05)
+    assert blocker.counters.accepted == len(samples)
+
+
+def test_bad_values_are_rejected_and_counted_by_reason() -> None:
+    samples = with_values(
+        run(1.0),
+        current_a=(10, math.inf),
+        speed_rad_s=(20, 1e6),
+        position_rad=(30, math.nan),
+    )
+    samples = with_values(samples, current_a=(400, 5.0 + 3.0))  # a spike of 3 A
+    _, blocker = feed_in_chunks(samples, 50)
+    rejected = blocker.counters.rejected
+    assert rejected[RejectReason.NON_FINITE] == 2
+    assert rejected[RejectReason.OUT_OF_RANGE] == 1
+    assert rejected[RejectReason.SPIKE] == 1
+    assert blocker.counters.accepted + blocker.counters.rejected_total == len(samples)
+
+
+def test_a_step_in_the_current_is_not_a_spike() -> None:
+    samples = run(1.0)
+    stepped = MotorSamples(
+        samples.stamp_s,
+        samples.current_a + np.where(np.arange(len(samples)) >= 500, 2.0, 0.0),
+        samples.speed_rad_s,
+        samples.position_rad,
+    )
+    _, blocker = feed_in_chunks(stepped, 64)
+    assert blocker.counters.rejected_total == 0
+
+
+def test_a_stuck_current_is_rejected_from_its_twentieth_sample() -> None:
+    samples = run(1.0)
+    current = samples.current_a.copy()
+    current[200:300] = 4.2
+    stuck = MotorSamples(samples.stamp_s, current, samples.speed_rad_s, samples.position_rad)
+    _, blocker = feed_in_chunks(stuck, 9)
+    assert blocker.counters.rejected[RejectReason.STUCK] == 100 - (STUCK_RUN_SAMPLES - 1)
+
+
+def test_time_going_backwards_is_rejected_then_followed_as_a_new_time_line() -> None:
+    samples = run(2.0)
+    stamps = samples.stamp_s.copy()
+    stamps[1000:] -= 0.5  # the clock jumps back by 0.5 s at sample 1000
+    jumped = MotorSamples(stamps, samples.current_a, samples.speed_rad_s, samples.position_rad)
+    blocks, blocker = feed_in_chunks(jumped, 128)
+    counters = blocker.counters
+    # Stamps that do not advance are rejected until the new line has run time_reset_after_s.
+    expected = round(PARAMS.filter.time_reset_after_s * RATE_HZ)
+    assert counters.rejected[RejectReason.TIME_BACKWARDS] == expected
+    assert counters.time_resets == 1
+    resets = [b for b in blocks if b.time_reset]
+    assert len(resets) == 1
+    assert all(
+        b2.stamp_s > b1.stamp_s for b1, b2 in itertools.pairwise(blocks) if not b2.time_reset
+    )
+
+
+def test_a_gap_in_the_samples_starts_a_new_grid_and_spans_the_prediction() -> None:
+    samples = run(2.0)
+    keep = np.ones(len(samples), dtype=bool)
+    keep[700:1500] = False  # 0.8 s dropout, longer than max_gap_s
+    blocks, blocker = feed_in_chunks(samples[keep], 100)
+    after = [b for b in blocks if b.after_gap]
+    assert len(after) == 1 and blocker.counters.gaps == 1
+    assert after[0].duration_s > 0.8
+
+
+def test_standstill_and_reversal_blocks_have_no_direction() -> None:
+    samples = run(1.0)
+    speed = np.where(np.arange(len(samples)) < 500, 0.0, -150.0)
+    speed[520:540] = np.linspace(-3.0, 3.0, 20)  # a reversal inside one block
+    moved = MotorSamples(samples.stamp_s, samples.current_a, speed, samples.position_rad)
+    blocks, _ = feed_in_chunks(moved, 1000)
+    directions = [b.direction for b in blocks]
+    assert directions[0] == 0 and directions[-1] == -1
+    assert 0 in directions[12:14]

@@ -1,0 +1,79 @@
+"""Estimator parameters: defaults, YAML loading, and errors that name the bad key."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import pytest
+
+from prsm_health.estimation.params import load_params, params_from_mapping
+from prsm_health.physics.errors import ParameterError
+
+
+def test_minimal_document_takes_the_defaults() -> None:
+    params = params_from_mapping({"actuator": {"preset": "dong2022-downhole"}})
+    assert params.rated_load_n == 55_000.0
+    assert params.radial_terms  # the downhole robot's wall contact is expected by default
+    assert params.max_motor_speed_rad_s > 0.0
+
+
+def test_no_radial_load_and_aligned_drops_the_ripple_states() -> None:
+    params = params_from_mapping(
+        {"actuator": {"preset": "dong2022-downhole"}, "model": {"radial_load_ratio": 0.0}}
+    )
+    assert not params.radial_terms
+    misaligned = params_from_mapping(
+        {
+            "actuator": {"preset": "meng2022-misalignment", "misalignment_arcmin": [1.0, 0.0]},
+            "model": {"radial_load_ratio": 0.0},
+        }
+    )
+    assert misaligned.radial_terms
+
+
+@pytest.mark.parametrize(
+    ("document", "field"),
+    [
+        ({}, "actuator"),
+        ({"actuator": {"preset": "dong2022-downhole"}, "filtre": {}}, "filtre"),
+        ({"actuator": {"preset": "dong2022-downhole"}, "filter": {"block_s": 1}}, "filter.block_s"),
+        (
+            {"actuator": {"preset": "dong2022-downhole"}, "filter": {"block_duration_s": -1}},
+            "filter.block_duration_s",
+        ),
+        (
+            {"actuator": {"preset": "dong2022-downhole"}, "noise": {"current_std_a": "high"}},
+            "noise.current_std_a",
+        ),
+        (
+            {"actuator": {"preset": "dong2022-downhole"}, "fidelity": {"filter": "pf"}},
+            "fidelity.filter",
+        ),
+        (
+            {"actuator": {"preset": "dong2022-downhole", "drive_train": {"gear_ratio": 0}}},
+            "drive_train.gear_ratio",
+        ),
+        (
+            {"actuator": {"preset": "dong2022-downhole"}, "model": {"initial_jammed_rollers": 11}},
+            "model.initial_jammed_rollers",
+        ),
+        (
+            {
+                "actuator": {"preset": "dong2022-downhole"},
+                "diagnostics": {"load_warn_fraction": 2.0, "load_error_fraction": 1.0},
+            },
+            "diagnostics.load_warn_fraction",
+        ),
+    ],
+)
+def test_invalid_documents_name_the_field(document: dict[str, object], field: str) -> None:
+    with pytest.raises(ParameterError, match=field.replace(".", r"\.")):
+        params_from_mapping(document)
+
+
+def test_load_params_reads_yaml_and_names_an_unreadable_file(tmp_path: Path) -> None:
+    path = tmp_path / "params.yaml"
+    path.write_text("actuator:\n  preset: li2020-jamming\nfilter:\n  block_duration_s: 2e-2\n")
+    assert load_params(path).filter.block_duration_s == pytest.approx(0.02)
+    with pytest.raises(ParameterError, match=r"missing\.yaml"):
+        load_params(tmp_path / "missing.yaml")

@@ -1,0 +1,67 @@
+"""The filter's surrogate: its tables agree with the physics core they are built from."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from prsm_health.estimation.surrogate import (
+    QUANTITIES,
+    DirectPhysics,
+    averaged_tables,
+    physics_averages,
+)
+from prsm_health.physics.geometry import Misalignment
+from prsm_health.physics.load_distribution import LoadingCase
+from prsm_health.physics.presets import PRESET_NAMES, load_preset
+
+#: Largest relative table error measured over 0.01-3x the largest load (1.4e-4 on
+#: dong2022-downhole, radial ratio 0.15), with margin for the other presets.
+TABLE_ERROR = 5e-4
+
+
+def values(preset_name: str, loads: np.ndarray, **options: object) -> np.ndarray:
+    averages = physics_averages(load_preset(preset_name), loads, **options)  # type: ignore[arg-type]
+    return np.stack([getattr(averages, name) for name in QUANTITIES])
+
+
+@pytest.mark.parametrize("name", PRESET_NAMES)
+def test_tables_match_the_physics_core_between_grid_points(name: str) -> None:
+    preset = load_preset(name)
+    tables = averaged_tables(preset, Misalignment(), 0.15, LoadingCase.BOTH_COMPRESSION)
+    loads = np.geomspace(0.01, 3.0, 23) * preset.largest_axial_load_n * 1.013
+    reference = values(name, loads, radial_ratio=0.15, case=LoadingCase.BOTH_COMPRESSION)
+    table = np.stack([tables.evaluate(float(f))[0] for f in loads], axis=1)
+    np.testing.assert_allclose(table, reference, rtol=TABLE_ERROR)
+
+
+def test_table_derivative_matches_a_central_difference() -> None:
+    preset = load_preset("dong2022-downhole")
+    tables = averaged_tables(preset, Misalignment(), 0.0, LoadingCase.SCREW_TENSION_NUT_COMPRESSION)
+    load, step = 23_456.0, 1.0
+    _, slope = tables.evaluate(load)
+    difference = (tables.evaluate(load + step)[0] - tables.evaluate(load - step)[0]) / (2 * step)
+    np.testing.assert_allclose(slope, difference, rtol=1e-3)
+
+
+def test_tables_are_zero_without_load_and_the_sign_of_the_load_does_not_matter() -> None:
+    preset = load_preset("dong2022-downhole")
+    tables = averaged_tables(preset, Misalignment(), 0.0, LoadingCase.SCREW_TENSION_NUT_COMPRESSION)
+    assert not tables.evaluate(0.0)[0].any()
+    np.testing.assert_array_equal(tables.evaluate(-1234.0)[0], tables.evaluate(1234.0)[0])
+
+
+def test_direct_physics_equals_the_averages_it_samples() -> None:
+    preset = load_preset("meng2022-misalignment")
+    tilt = Misalignment.from_arcmin(1.0, 0.0)
+    direct = DirectPhysics(preset, tilt, 0.0, LoadingCase.SCREW_TENSION_NUT_COMPRESSION)
+    reference = values("meng2022-misalignment", np.array([20e3]), misalignment=tilt, angles=1)[:, 0]
+    np.testing.assert_allclose(direct.evaluate(20e3)[0], reference, rtol=1e-12)
+
+
+def test_a_jammed_roller_slides_with_many_times_the_rolling_torque() -> None:
+    """Paper 002: r = jammed / rolling torque of one roller is far above 1 (60-90 here)."""
+    averages = physics_averages(load_preset("li2020-jamming"), [15e3])
+    ratio = averages.sliding_nm / (averages.rolling_nm + averages.viscous_nm * 31.4**0.66)
+    assert 40.0 < float(ratio[0]) < 120.0
+    assert averages.wear_jammed_m[0] > averages.wear_healthy_m[0]
