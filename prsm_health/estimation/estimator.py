@@ -11,12 +11,14 @@ docs/estimation.md explains the model, what is observable and each option.
 
 from __future__ import annotations
 
+import hashlib
 import math
 from collections import deque
+from typing import Any
 
 import numpy as np
 
-from prsm_health.estimation.degradation import DegradationIntegrator
+from prsm_health.estimation.degradation import Degradation, DegradationIntegrator
 from prsm_health.estimation.estimate import EstimateEvent, HealthState
 from prsm_health.estimation.hypotheses import JamHypotheses, StepResult
 from prsm_health.estimation.inputs import Block, InputCounters, SampleBlocker, merge_blocks
@@ -32,6 +34,29 @@ from prsm_health.signals import MotorSamples
 GATED_BLOCKS_BEFORE_RESET = 5
 #: The NIS divergence test needs at least this many blocks in its window.
 MIN_BLOCKS_FOR_DIVERGENCE = 10
+#: Version of the :meth:`HealthEstimator.snapshot` layout.
+SNAPSHOT_FORMAT = 1
+
+
+class SnapshotError(ValueError):
+    """A saved estimator state cannot be resumed (malformed, or of another actuator)."""
+
+
+def actuator_fingerprint(params: EstimatorParams) -> str:
+    """A stable digest of what the state depends on: geometry, materials, drive train."""
+    actuator = params.actuator
+    text = repr(
+        (
+            actuator.preset.geometry,
+            actuator.preset.friction,
+            actuator.preset.wear,
+            actuator.preset.fatigue,
+            actuator.drive_train,
+            actuator.misalignment,
+            params.radial_terms,
+        )
+    )
+    return hashlib.sha256(text.encode()).hexdigest()[:16]
 
 
 class HealthEstimator:
@@ -54,6 +79,71 @@ class HealthEstimator:
     def counters(self) -> InputCounters:
         """Samples accepted and rejected (by reason) so far."""
         return self._blocker.counters
+
+    # --- persistence --------------------------------------------------------------------
+    def snapshot(self) -> dict[str, Any]:
+        """Everything needed to resume after a restart, as plain JSON-able data.
+
+        The hypotheses' filter states and probabilities, the accumulated degradation, the
+        input counters, and a fingerprint of the actuator: :meth:`restore` refuses a snapshot
+        of another geometry or drive train.
+        """
+        bank = self._bank
+        return {
+            "format": SNAPSHOT_FORMAT,
+            "actuator": actuator_fingerprint(self.params),
+            "hypotheses": {
+                str(k): {
+                    "log_probability": bank.log_prob[k],
+                    "x": kf.x.tolist(),
+                    "P": kf.P.tolist(),
+                }
+                for k, kf in bank.filters.items()
+            },
+            "degradation": self._degradation.state.to_dict(),
+            "samples_accepted": self.counters.accepted,
+            "samples_rejected": self.counters.rejected,
+        }
+
+    def restore(self, snapshot: dict[str, Any]) -> None:
+        """Resume from :meth:`snapshot`; raises SnapshotError if it does not fit."""
+        try:
+            if snapshot["format"] != SNAPSHOT_FORMAT:
+                raise SnapshotError(f"format {snapshot['format']!r}, expected {SNAPSHOT_FORMAT}")
+            if snapshot["actuator"] != actuator_fingerprint(self.params):
+                raise SnapshotError(
+                    "the state belongs to another actuator (preset, geometry or drive train "
+                    "differ): refusing to resume from it"
+                )
+            hypotheses = {int(k): v for k, v in snapshot["hypotheses"].items()}
+            dim = self._model.dim
+            states = {}
+            for k, entry in hypotheses.items():
+                x = np.asarray(entry["x"], dtype=np.float64)
+                p = np.asarray(entry["P"], dtype=np.float64)
+                log_probability = float(entry["log_probability"])
+                valid = (
+                    0 <= k <= self._bank.n_rollers
+                    and x.shape == (dim,)
+                    and p.shape == (dim, dim)
+                    and np.all(np.isfinite(x))
+                    and np.all(np.isfinite(p))
+                    and log_probability <= 0.0
+                )
+                if not valid:
+                    raise SnapshotError(f"hypothesis {k} is malformed")
+                states[k] = (x, p, log_probability)
+            degradation = Degradation(**{k: float(v) for k, v in snapshot["degradation"].items()})
+            accepted = int(snapshot["samples_accepted"])
+            rejected = [int(v) for v in snapshot["samples_rejected"]]
+        except (KeyError, TypeError, ValueError) as exc:
+            raise SnapshotError(f"malformed state: {exc!r}") from exc
+        if not states or not all(math.isfinite(v) for v in degradation.to_dict().values()):
+            raise SnapshotError("no hypotheses, or non-finite degradation values")
+        self._bank.restore(states)
+        self._degradation.state = degradation
+        self.counters.accepted = accepted
+        self.counters.rejected = rejected
 
     def process(self, samples: MotorSamples) -> list[HealthState]:
         """Feed samples (any number); returns the estimates of the blocks they complete."""

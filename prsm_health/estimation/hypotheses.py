@@ -263,6 +263,14 @@ class JamHypotheses:
             del self.filters[k], self.log_prob[k]
         self._normalise()
 
+    def restore(self, states: dict[int, tuple[FloatArray, FloatArray, float]]) -> None:
+        """Replace the hypotheses by saved ones: count -> (x, P, log probability)."""
+        self.filters = {
+            k: self._new_filter(x, self._safe_covariance(p)) for k, (x, p, _) in states.items()
+        }
+        self.log_prob = {k: log_probability for k, (_, _, log_probability) in states.items()}
+        self._normalise()
+
     def reinitialise_load(self) -> None:
         """Forget the load and its rate (after a time reset, a gap or a divergence)."""
         for kf in self.filters.values():
