@@ -1,0 +1,156 @@
+"""Scoring estimates against a simulated run's ground truth (replay --metrics-json, benchmark).
+
+The truth (``/truth/state``, :class:`~prsm_health.signals.TruthSamples`) is sampled at each
+estimate's stamp (the latest truth sample at or before it). Definitions:
+
+- load errors: over estimates while the screw moves (|w_s| above 1 % of the preset's largest
+  speed), signed load estimate minus signed truth; RMSE and max, also as % of the rated load;
+- NEES: (error / std)^2 of the load while moving. The test of consistency: the estimates are
+  thinned to one per second (they are strongly correlated within a second), and the mean NEES
+  of those n values must lie in the two-sided 95 % interval of chi^2(n) / n;
+- jams: for each increase of the true count at time t_j, the delay until the most likely
+  count first equals the new count (None if never); a false declaration is each onset of a
+  most likely count above the true one;
+- precision loss: the final error (absolute and relative to the final truth), and the
+  fraction of estimates whose truth lies within +-2 std.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import asdict, dataclass
+
+import numpy as np
+from numpy.typing import NDArray
+from scipy.stats import chi2
+
+from prsm_health.estimation.estimate import HealthState
+from prsm_health.signals import TruthSamples
+
+FloatArray = NDArray[np.float64]
+
+#: The screw counts as moving above this fraction of the preset's largest speed.
+MOVING_FRACTION = 0.01
+
+
+@dataclass(frozen=True)
+class JamDetection:
+    """One true jam onset and when the estimator identified it."""
+
+    onset_s: float
+    count: int
+    delay_s: float | None
+
+
+@dataclass(frozen=True)
+class Metrics:
+    """Scores of one run (SI units; percentages of the rated load where named)."""
+
+    estimates: int
+    moving_estimates: int
+    load_rmse_n: float
+    load_rmse_percent_rated: float
+    load_max_error_n: float
+    load_nees_mean: float
+    load_nees_interval: tuple[float, float]
+    load_nees_consistent: bool
+    jams: tuple[JamDetection, ...]
+    false_jam_declarations: int
+    false_jam_seconds: float
+    precision_loss_final_m: float
+    precision_loss_truth_final_m: float
+    precision_loss_error_percent: float
+    precision_loss_coverage_2sigma: float
+
+    def to_dict(self) -> dict[str, object]:
+        """JSON-able form (``--metrics-json``)."""
+        data = asdict(self)
+        data["jams"] = [asdict(j) for j in self.jams]
+        return data
+
+
+def _truth_at(truth: TruthSamples, stamps: FloatArray) -> NDArray[np.int64]:
+    """Index of the latest truth sample at or before each stamp (the first one before it)."""
+    index = np.searchsorted(truth.stamp_s, stamps, side="right") - 1
+    return np.asarray(np.clip(index, 0, len(truth) - 1), dtype=np.int64)
+
+
+def score(
+    states: list[HealthState],
+    truth: TruthSamples,
+    *,
+    rated_load_n: float,
+    largest_screw_speed_rad_s: float,
+) -> Metrics:
+    """Score ``states`` against ``truth`` (see the module docstring)."""
+    if not states or len(truth) == 0:
+        raise ValueError("score: no estimates or no truth to compare")
+    stamps = np.array([s.stamp_s for s in states])
+    at = _truth_at(truth, stamps)
+    load = np.array([s.axial_load_n for s in states])
+    load_std = np.array([s.axial_load_std_n for s in states])
+    moving = np.abs(truth.screw_speed_rad_s[at]) > MOVING_FRACTION * largest_screw_speed_rad_s
+    error = load - truth.axial_load_n[at]
+    moving_error = error[moving]
+    rmse = float(np.sqrt(np.mean(moving_error**2))) if moving_error.size else math.nan
+    nees = (moving_error / np.maximum(load_std[moving], 1e-9)) ** 2
+    nees_mean, interval, consistent = _nees_test(stamps[moving], nees)
+
+    estimated_count = np.array([s.jammed_rollers_most_likely for s in states])
+    true_count = truth.jammed_rollers[at]
+    jams = _jam_detections(truth, stamps, estimated_count)
+    over = estimated_count > true_count
+    onsets = int(np.count_nonzero(over[1:] & ~over[:-1]) + int(over[0]))
+    durations = np.diff(stamps, append=stamps[-1])
+    loss = np.array([s.precision_loss_m for s in states])
+    loss_std = np.array([s.precision_loss_std_m for s in states])
+    loss_truth = truth.precision_loss_m[at]
+    covered = np.abs(loss - loss_truth) <= 2.0 * loss_std + 1e-15
+    final_truth = float(loss_truth[-1])
+    return Metrics(
+        estimates=len(states),
+        moving_estimates=int(np.count_nonzero(moving)),
+        load_rmse_n=rmse,
+        load_rmse_percent_rated=100.0 * rmse / rated_load_n,
+        load_max_error_n=float(np.abs(moving_error).max()) if moving_error.size else math.nan,
+        load_nees_mean=nees_mean,
+        load_nees_interval=interval,
+        load_nees_consistent=consistent,
+        jams=tuple(jams),
+        false_jam_declarations=onsets,
+        false_jam_seconds=float(durations[over].sum()),
+        precision_loss_final_m=float(loss[-1]),
+        precision_loss_truth_final_m=final_truth,
+        precision_loss_error_percent=(
+            100.0 * (float(loss[-1]) - final_truth) / final_truth if final_truth > 0 else math.nan
+        ),
+        precision_loss_coverage_2sigma=float(np.mean(covered)),
+    )
+
+
+def _nees_test(stamps: FloatArray, nees: FloatArray) -> tuple[float, tuple[float, float], bool]:
+    """Mean NEES of one estimate per second and its 95 % chi-square interval."""
+    if nees.size == 0:
+        return math.nan, (math.nan, math.nan), False
+    seconds = np.floor(stamps - stamps[0]).astype(np.int64)
+    first = np.flatnonzero(np.r_[True, seconds[1:] != seconds[:-1]])
+    thinned = nees[first]
+    n = len(thinned)
+    interval = (float(chi2.ppf(0.025, n) / n), float(chi2.ppf(0.975, n) / n))
+    mean = float(thinned.mean())
+    return mean, interval, interval[0] <= mean <= interval[1]
+
+
+def _jam_detections(
+    truth: TruthSamples, stamps: FloatArray, estimated: NDArray[np.int64]
+) -> list[JamDetection]:
+    counts = truth.jammed_rollers
+    onsets = np.flatnonzero(np.diff(counts) > 0) + 1
+    detections = []
+    for index in onsets:
+        onset = float(truth.stamp_s[index])
+        count = int(counts[index])
+        after = np.flatnonzero((stamps >= onset) & (estimated == count))
+        delay = float(stamps[after[0]] - onset) if after.size else None
+        detections.append(JamDetection(onset_s=onset, count=count, delay_s=delay))
+    return detections

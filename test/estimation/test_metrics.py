@@ -1,0 +1,96 @@
+"""Scores against ground truth: hand-made runs where every metric is known."""
+
+from __future__ import annotations
+
+import dataclasses
+
+import numpy as np
+import pytest
+
+from prsm_health.estimation.estimate import EstimateEvent, HealthState
+from prsm_health.estimation.metrics import score
+from prsm_health.signals import TruthSamples
+
+N_ROLLERS = 10
+
+
+def truth(seconds: float, jam_at: float | None) -> TruthSamples:
+    t = np.arange(0.0, seconds, 0.01)
+    jammed = np.zeros((len(t), N_ROLLERS), dtype=bool)
+    if jam_at is not None:
+        jammed[t >= jam_at, 3] = True
+    n = len(t)
+    return TruthSamples(
+        stamp_s=t,
+        axial_load_n=np.full(n, 20e3),
+        radial_load_n=np.zeros(n),
+        loading_case=np.ones(n, dtype=np.int64),
+        roller_jammed=jammed,
+        precision_loss_m=1e-6 * t,
+        friction_torque_nm=np.ones(n),
+        fatigue_damage=np.zeros(n),
+        screw_speed_rad_s=np.full(n, 30.0),
+        carrier_angle_rad=np.zeros(n),
+        wear_coefficient_factor=np.ones(n),
+    )
+
+
+def state(stamp: float, load: float, std: float, count: int, loss: float) -> HealthState:
+    probabilities = [0.0] * (N_ROLLERS + 1)
+    probabilities[count] = 1.0
+    return HealthState(
+        stamp_s=stamp,
+        axial_load_n=load,
+        axial_load_std_n=std,
+        jam_probabilities=tuple(probabilities),
+        precision_loss_m=loss,
+        precision_loss_std_m=0.05e-6,
+        precision_loss_rate_m_per_s=1e-6,
+        friction_torque_nm=1.0,
+        efficiency=0.9,
+        fatigue_damage=0.0,
+        fatigue_damage_std=0.0,
+        screw_speed_rad_s=30.0,
+        samples_accepted=0,
+        samples_rejected=0,
+        nis=1.0,
+        event=EstimateEvent.NONE,
+    )
+
+
+def test_known_errors_delays_and_false_declarations() -> None:
+    stamps = np.arange(0.02, 20.0, 0.04)
+    rng = np.random.default_rng(0)
+    states = [
+        state(
+            float(t),
+            20e3 + float(rng.normal(0.0, 100.0)),
+            100.0,
+            (1 if t >= 10.5 else 0) + (1 if 3.0 <= t < 3.5 else 0),
+            1e-6 * float(t) * 1.02,
+        )
+        for t in stamps
+    ]
+    metrics = score(states, truth(20.0, 10.0), rated_load_n=55e3, largest_screw_speed_rad_s=73.3)
+    assert metrics.load_rmse_n == pytest.approx(100.0, rel=0.15)
+    assert metrics.load_rmse_percent_rated == pytest.approx(100 * metrics.load_rmse_n / 55e3)
+    assert metrics.load_nees_consistent
+    (jam,) = metrics.jams
+    assert jam.onset_s == pytest.approx(10.0) and jam.count == 1
+    assert jam.delay_s == pytest.approx(0.5, abs=0.05)
+    assert metrics.false_jam_declarations == 1
+    assert metrics.false_jam_seconds == pytest.approx(0.5, abs=0.05)
+    assert metrics.precision_loss_error_percent == pytest.approx(2.0, rel=0.05)
+
+
+def test_overconfident_load_fails_the_nees_test_and_coverage_counts() -> None:
+    stamps = np.arange(0.02, 20.0, 0.04)
+    states = [state(float(t), 21e3, 100.0, 0, 1e-6 * float(t) + 3e-7) for t in stamps]
+    metrics = score(states, truth(20.0, None), rated_load_n=55e3, largest_screw_speed_rad_s=73.3)
+    assert not metrics.load_nees_consistent
+    assert metrics.jams == ()
+    assert metrics.false_jam_declarations == 0
+    assert metrics.precision_loss_coverage_2sigma == 0.0  # 0.3 um off, 2 std = 0.1 um
+    wider = [dataclasses.replace(s, precision_loss_std_m=2e-7) for s in states]
+    covered = score(wider, truth(20.0, None), rated_load_n=55e3, largest_screw_speed_rad_s=73.3)
+    assert covered.precision_loss_coverage_2sigma == 1.0
