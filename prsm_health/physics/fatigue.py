@@ -61,10 +61,29 @@ def damage_rate_per_s(
     leading dims with ``screw_speed_rad_s``. Zero at zero load or zero speed.
     """
     forces = validate_contact_loads(geometry, screw_roller_n)
+    return damage_rate_from_peak_per_s(
+        geometry, params, forces.max(axis=(-2, -1)), screw_speed_rad_s
+    )
+
+
+def damage_rate_from_peak_per_s(
+    geometry: Geometry,
+    params: FatigueParameters,
+    peak_force_n: ArrayLike,
+    screw_speed_rad_s: ArrayLike,
+) -> FloatArray:
+    """:func:`damage_rate_per_s` from the largest screw-roller contact force (000 eq. 29).
+
+    ``peak_force_n`` (>= 0, the most loaded contact of each load case) broadcasts with
+    ``screw_speed_rad_s``; for callers that track the peak force only (the truth simulator).
+    """
+    peak_force = np.asarray(peak_force_n, dtype=np.float64)
+    if not (np.isfinite(peak_force).all() and (peak_force >= 0.0).all()):
+        raise ParameterError("peak_force_n", "must be finite and >= 0")
     speed = np.asarray(screw_speed_rad_s, dtype=np.float64)
     if not np.isfinite(speed).all():
         raise ParameterError("screw_speed_rad_s", "must be finite")
-    peak = thread_contacts(geometry).screw_roller.max_pressure_pa(forces.max(axis=(-2, -1)))
+    peak = thread_contacts(geometry).screw_roller.max_pressure_pa(peak_force)
     try:
         shape = np.broadcast_shapes(peak.shape, speed.shape)
     except ValueError as exc:

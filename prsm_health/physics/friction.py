@@ -78,6 +78,10 @@ FloatArray = NDArray[np.float64]
 # Houpert's EHL rolling force (paper 002 eq. 5): prefactor and exponents of k, G, U, W.
 _HOUPERT_FACTOR = 2.86
 _K_EXP, _G_EXP, _U_EXP, _W_EXP = 0.348, 0.022, 0.66, 0.47
+#: The viscous torque goes as |omega_s|^0.66 and (per contact) Q^0.47 (Houpert's U and W
+#: exponents); the other losses do not depend on speed.
+VISCOUS_SPEED_EXPONENT = _U_EXP
+VISCOUS_LOAD_EXPONENT = _W_EXP
 # Differential sliding factor of paper 002 eq. 4: 0.08 (2f + 1)^2 / (16 f^2) for f -> infinity.
 _DIFFERENTIAL_FACTOR = 0.08 / 4.0
 
