@@ -1,0 +1,201 @@
+"""Damaged bags: everything complete before the damage is delivered, then a BagDamagedError."""
+
+from __future__ import annotations
+
+import struct
+from pathlib import Path
+
+import pytest
+from mcap.reader import NonSeekingReader
+
+from prsm_health.bags.errors import BagDamagedError, BagError
+from prsm_health.bags.reader import InputTopics, iter_motor_samples, read_motor_samples, read_truth
+from prsm_health.bags.typestore import MOTOR_STATE
+from prsm_health.bags.writer import BagWriter, write_motor_states, write_truth
+from prsm_health.signals import MotorSamples
+from test.bags.samples import (
+    assert_same,
+    mcap_file,
+    motor_samples,
+    split_bag,
+    truth_samples,
+    with_quantised_stamps,
+    write_bag,
+)
+
+COUNT = 40000
+
+
+@pytest.fixture(scope="module")
+def intact(tmp_path_factory: pytest.TempPathFactory) -> tuple[Path, MotorSamples]:
+    motor = motor_samples(COUNT)
+    bag = write_bag(tmp_path_factory.mktemp("d") / "bag", motor=motor, truth=truth_samples(COUNT))
+    return bag, with_quantised_stamps(motor)
+
+
+def _chunk_offsets(data: bytes) -> list[int]:
+    """Byte offsets of the top-level Chunk records."""
+    pos, found = 8, []
+    while pos + 9 <= len(data):
+        op, length = struct.unpack_from("<BQ", data, pos)
+        if op == 0x06:
+            found.append(pos)
+        if op == 0x0F:
+            break
+        pos += 9 + length
+    return found
+
+
+def _complete_messages(path: Path) -> int:
+    """Messages of /motor_state the mcap library streams from the file before it fails."""
+    count = 0
+    with path.open("rb") as stream:
+        try:
+            for _, channel, _ in NonSeekingReader(stream).iter_messages(log_time_order=False):
+                count += channel.topic == "/motor_state"
+        except Exception:  # noqa: S110 - any error ends the stream; the count is what we want
+            pass
+    return count
+
+
+def _cut_points(data: bytes) -> dict[str, int]:
+    chunks = _chunk_offsets(data)
+    last_chunk_end = chunks[-1] + 9 + struct.unpack_from("<Q", data, chunks[-1] + 1)[0]
+    summary = struct.unpack_from("<Q", data, len(data) - 37 + 9)[0]
+    return {
+        "empty": 0,
+        "inside the magic": 5,
+        "inside the header record": 12,
+        "inside the first chunk": chunks[0] + 5000,
+        "inside a middle chunk": chunks[len(chunks) // 2] + 777,
+        "between chunk and message index": last_chunk_end,
+        "inside the summary": summary + 100,
+        "before the end magic": len(data) - 3,
+    }
+
+
+@pytest.mark.parametrize(
+    "where",
+    [
+        "empty",
+        "inside the magic",
+        "inside the header record",
+        "inside the first chunk",
+        "inside a middle chunk",
+        "between chunk and message index",
+        "inside the summary",
+        "before the end magic",
+    ],
+)
+def test_truncated_file_delivers_the_complete_chunks_then_raises(
+    intact: tuple[Path, MotorSamples], tmp_path: Path, where: str
+) -> None:
+    bag, motor = intact
+    data = mcap_file(bag).read_bytes()
+    cut = _cut_points(data)[where]
+    damaged = tmp_path / "cut.mcap"
+    damaged.write_bytes(data[:cut])
+    expected = _complete_messages(damaged)
+
+    chunks: list[MotorSamples] = []
+    with pytest.raises(BagDamagedError, match=rf"{damaged}: damaged at byte \d+: ") as info:
+        for chunk in iter_motor_samples(damaged, chunk_size=5000):
+            chunks.append(chunk)
+    got = MotorSamples.concatenate(chunks) if chunks else motor[0:0]
+    assert len(got) == expected
+    assert_same(got, motor[0:expected])
+    if where in ("inside the summary", "before the end magic"):
+        assert expected == COUNT and "every message in it was read" in str(info.value)
+    if expected == 0:
+        assert "topic /motor_state not seen before it" in str(info.value)
+
+    partial, error = read_motor_samples(damaged, partial_ok=True)
+    assert_same(partial, got)
+    assert isinstance(error, BagDamagedError) and error.path == damaged
+    with pytest.raises(BagDamagedError):
+        read_motor_samples(damaged)
+
+
+def test_truncated_file_inside_a_bag_directory(
+    intact: tuple[Path, MotorSamples], tmp_path: Path
+) -> None:
+    bag, motor = intact
+    copy = tmp_path / "bag"
+    copy.mkdir()
+    (copy / "metadata.yaml").write_bytes((bag / "metadata.yaml").read_bytes())
+    data = mcap_file(bag).read_bytes()
+    mcap_file(copy).write_bytes(data[: len(data) // 5])  # all /motor_state chunks come first
+    partial, error = read_motor_samples(copy, partial_ok=True)
+    assert 0 < len(partial) < COUNT
+    assert_same(partial, motor[0 : len(partial)])
+    assert error is not None and error.path == mcap_file(copy)
+    assert "record at byte" in str(error) and "truncated file?" in str(error)
+    truth, truth_error = read_truth(copy, partial_ok=True)
+    assert truth is not None and len(truth) == 0 and truth_error is not None
+    with pytest.raises(BagDamagedError):
+        read_truth(copy)
+
+
+def test_corrupt_chunk_size_and_record_length(tmp_path: Path) -> None:
+    motor = with_quantised_stamps(motor_samples(40000))
+    for compress in (True, False):
+        bag = write_bag(tmp_path / f"bag{compress}", motor=motor, compress=compress)
+        data = bytearray(mcap_file(bag).read_bytes())
+        second = _chunk_offsets(bytes(data))[1]
+        if compress:  # the announced uncompressed size of the second chunk
+            struct.pack_into("<Q", data, second + 9 + 16, 12345)
+            reason = "12345 announced"
+        else:  # the length of the first record inside the second chunk
+            records = second + 9 + 28 + 4 + 8  # times, size, crc, "" compression, records length
+            struct.pack_into("<Q", data, records + 1, 2**40)
+            reason = "overruns its chunk"
+        mcap_file(bag).write_bytes(bytes(data))
+        partial, error = read_motor_samples(bag, partial_ok=True)
+        assert error is not None
+        assert error.path == mcap_file(bag)
+        assert f"Chunk record at byte {second}" in str(error) or f"byte {second}:" in str(error)
+        assert 0 < len(partial) < len(motor)
+        assert_same(partial, motor[0 : len(partial)])
+        assert reason in str(error)
+
+
+def test_corrupt_payload_delivers_the_messages_before_it(tmp_path: Path) -> None:
+    motor = motor_samples(300, faults=False)
+    bag = tmp_path / "bag"
+    with BagWriter(bag) as writer:
+        write_motor_states(writer, motor[0:100])
+        writer.write_cdr("/motor_state", 99_950_000, b"\x00\x01\x00\x00garbage")
+        write_motor_states(writer, motor[100:300])
+    chunks = []
+    match = rf"{bag}: /motor_state: the message at log time 99950000 ns is not a valid "
+    with pytest.raises(BagDamagedError, match=match + MOTOR_STATE):
+        for chunk in iter_motor_samples(bag, chunk_size=30):
+            chunks.append(chunk)
+    assert [len(c) for c in chunks] == [30, 30, 30, 10]
+    assert_same(MotorSamples.concatenate(chunks), with_quantised_stamps(motor[0:100]))
+
+
+def test_not_an_mcap_file(tmp_path: Path) -> None:
+    path = tmp_path / "fake.mcap"
+    path.write_bytes(b"PK\x03\x04 this is a zip file")
+    with pytest.raises(BagDamagedError, match=r"fake\.mcap: damaged at byte 0: not an MCAP file"):
+        read_motor_samples(path)
+    with pytest.raises(BagError, match="not an MCAP file"):
+        read_motor_samples(path, InputTopics(joint_states="/joint_states"))
+
+
+@pytest.mark.parametrize("split", [False, True])  # change inside one chunk, or between files
+def test_truth_whose_roller_count_changes(tmp_path: Path, split: bool) -> None:
+    before = 3000
+    first, second = truth_samples(before, rollers=5), truth_samples(100, rollers=7, t0=100.0)
+    if split:
+        parts = [write_bag(tmp_path / "a", truth=first), write_bag(tmp_path / "b", truth=second)]
+        bag = split_bag(tmp_path / "bag", parts)
+    else:
+        with BagWriter(tmp_path / "bag") as writer:
+            write_truth(writer, first)
+            write_truth(writer, second)
+        bag = tmp_path / "bag"
+    truth, error = read_truth(bag, partial_ok=True)
+    assert truth is not None and truth.roller_jammed.shape == (before, 5)
+    assert error is not None and "roller_jammed has shape (7,), earlier messages (5,)" in str(error)

@@ -1,0 +1,220 @@
+"""BagWriter: compressed MCAP readable by rosbags and by mcap + mcap_ros2, reproducible, fast."""
+
+from __future__ import annotations
+
+import time
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+import pytest
+from mcap.reader import make_reader
+from mcap_ros2.decoder import DecoderFactory
+from rosbags.rosbag2 import Reader
+
+from prsm_health.bags.errors import BagError
+from prsm_health.bags.stamps import log_times_from_stamps, seconds_to_stamps
+from prsm_health.bags.typestore import GROUND_TRUTH, JOINT_STATE, MOTOR_STATE, typestore
+from prsm_health.bags.writer import LIBRARY, BagWriter, write_motor_states
+from test.bags.samples import mcap_file, motor_samples, truth_samples, write_bag
+
+
+def _rows(t: np.ndarray, *columns: Any) -> list[tuple[Any, ...]]:
+    """(sec, nanosec, values...) per message, stamps as the writer converts them."""
+    sec, nanosec = seconds_to_stamps(t)
+    return list(zip(sec.tolist(), nanosec.tolist(), *columns, strict=True))
+
+
+def _expected(motor: Any, joint: Any, truth: Any) -> dict[str, list[tuple[Any, ...]]]:
+    """Per topic, the rows the writer must have put in the bag (as :func:`_row` reads them)."""
+    jammed = truth.roller_jammed
+    return {
+        "/motor_state": _rows(
+            motor.stamp_s, motor.current_a, motor.speed_rad_s, motor.position_rad
+        ),
+        "/joint_states": _rows(
+            joint.stamp_s,
+            [["prsm_motor"]] * len(joint),
+            joint.position_rad,
+            joint.speed_rad_s,
+            joint.current_a,
+        ),
+        "/truth/state": _rows(
+            truth.stamp_s,
+            truth.axial_load_n,
+            truth.loading_case.tolist(),
+            jammed.sum(axis=1).tolist(),
+            jammed.tolist(),
+            truth.precision_loss_m * 1e6,
+            truth.wear_coefficient_factor,
+        ),
+    }
+
+
+def _row(topic: str, m: Any) -> tuple[Any, ...]:
+    stamp = (m.header.stamp.sec, m.header.stamp.nanosec)
+    if topic == "/motor_state":
+        return (*stamp, m.current_a, m.speed_rad_s, m.position_rad)
+    if topic == "/joint_states":
+        return (
+            *stamp,
+            list(m.name),
+            *(float(getattr(m, n)[0]) for n in ("position", "velocity", "effort")),
+        )
+    return (
+        *stamp,
+        m.axial_load_n,
+        m.loading_case,
+        m.jammed_rollers,
+        [bool(x) for x in m.roller_jammed],
+        m.precision_loss_um,
+        m.wear_coefficient_factor,
+    )
+
+
+def _same_rows(got: list[tuple[Any, ...]], want: list[tuple[Any, ...]]) -> None:
+    assert len(got) == len(want)
+    for g, w in zip(got, want, strict=True):
+        assert len(g) == len(w)
+        for a, b in zip(g, w, strict=True):
+            assert a == b or (a != a and b != b), (g, w)  # NaN == NaN
+
+
+@pytest.fixture(scope="module")
+def full_bag(tmp_path_factory: pytest.TempPathFactory) -> tuple[Path, dict[str, Any]]:
+    motor, joint, truth = motor_samples(3000), motor_samples(500, seed=4), truth_samples(700)
+    bag = write_bag(tmp_path_factory.mktemp("w") / "bag", motor=motor, joint=joint, truth=truth)
+    return bag, _expected(motor, joint, truth)
+
+
+def test_rosbags_reads_every_message(full_bag: tuple[Path, dict[str, Any]]) -> None:
+    bag, expected = full_bag
+    store = typestore()
+    got: dict[str, list[tuple[Any, ...]]] = {topic: [] for topic in expected}
+    with Reader(bag) as reader:
+        types = {c.topic: c.msgtype for c in reader.connections}
+        assert types == {
+            "/motor_state": MOTOR_STATE,
+            "/joint_states": JOINT_STATE,
+            "/truth/state": GROUND_TRUTH,
+        }
+        for connection, _, data in reader.messages():
+            message = store.deserialize_cdr(data, connection.msgtype)
+            got[connection.topic].append(_row(connection.topic, message))
+    for topic, rows in expected.items():
+        _same_rows(got[topic], rows)
+
+
+def test_mcap_ros2_decodes_every_message_from_the_embedded_schemas(
+    full_bag: tuple[Path, dict[str, Any]],
+) -> None:
+    bag, expected = full_bag
+    got: dict[str, list[tuple[Any, ...]]] = {topic: [] for topic in expected}
+    with mcap_file(bag).open("rb") as stream:
+        reader = make_reader(stream, decoder_factories=[DecoderFactory()])
+        assert reader.get_header().library == LIBRARY
+        summary = reader.get_summary()
+        assert summary is not None
+        assert {c.compression for c in summary.chunk_indexes} == {"zstd"}
+        for _, channel, _, message in reader.iter_decoded_messages(log_time_order=False):
+            got[channel.topic].append(_row(channel.topic, message))
+    for topic, rows in expected.items():
+        _same_rows(got[topic], rows)
+
+
+def test_log_times_follow_the_stamps_or_the_receive_times(tmp_path: Path) -> None:
+    motor = motor_samples(50)
+    receive = np.arange(50, dtype=np.int64) * 7 + 1_700_000_000_000_000_000
+    with BagWriter(tmp_path / "a") as writer:
+        write_motor_states(writer, motor)
+        write_motor_states(writer, motor, topic="/received", receive_time_ns=receive)
+    with Reader(tmp_path / "a") as reader:
+        times: dict[str, list[int]] = {"/motor_state": [], "/received": []}
+        for connection, timestamp, _ in reader.messages():
+            times[connection.topic].append(timestamp)
+    assert times["/motor_state"] == log_times_from_stamps(motor.stamp_s).tolist()
+    assert times["/received"] == receive.tolist()
+
+
+def test_same_inputs_give_byte_identical_bags(tmp_path: Path) -> None:
+    kwargs = {
+        "motor": motor_samples(20000),
+        "joint": motor_samples(100),
+        "truth": truth_samples(900),
+    }
+    first = write_bag(tmp_path / "1" / "bag", **kwargs)
+    time.sleep(1.1)  # a wall-clock time anywhere in the files would now differ
+    second = write_bag(tmp_path / "2" / "bag", **kwargs)
+    for name in ("metadata.yaml", "bag.mcap"):
+        assert (first / name).read_bytes() == (second / name).read_bytes(), name
+    assert b"rosbags-" not in mcap_file(first).read_bytes()[:200]
+
+
+def test_chunk_compression_makes_small_files(tmp_path: Path) -> None:
+    motor = motor_samples(20000, faults=False)
+    motor = type(motor)(
+        motor.stamp_s,
+        np.round(motor.current_a, 2),
+        motor.speed_rad_s * 0,
+        np.cumsum(np.full(20000, 1e-3)),
+    )
+    small = mcap_file(write_bag(tmp_path / "z", motor=motor)).stat().st_size
+    plain = mcap_file(write_bag(tmp_path / "p", motor=motor, compress=False)).stat().st_size
+    assert plain / 20000 > 80
+    assert small < plain / 2
+
+
+def test_sixty_thousand_motor_states_write_well_under_two_seconds(tmp_path: Path) -> None:
+    motor = motor_samples(60000)
+    typestore()
+    start = time.perf_counter()
+    write_bag(tmp_path / "fast", motor=motor)
+    assert time.perf_counter() - start < 1.0
+
+
+def test_single_messages_and_raw_cdr(tmp_path: Path) -> None:
+    store = typestore()
+    types = store.types
+    message = types[MOTOR_STATE](
+        types["std_msgs/msg/Header"](types["builtin_interfaces/msg/Time"](1, 2), "m"), 1.0, 2.0, 3.0
+    )
+    with BagWriter(tmp_path / "one") as writer:
+        writer.add_topic("/m", MOTOR_STATE)
+        writer.add_topic("/m", MOTOR_STATE)  # again: no-op
+        writer.write("/m", 5, message)
+        writer.write_cdr("/m", 6, store.serialize_cdr(message, MOTOR_STATE))
+        assert writer.topics == {"/m": MOTOR_STATE}
+    with Reader(tmp_path / "one") as reader:
+        got = [(t, store.deserialize_cdr(d, MOTOR_STATE)) for _, t, d in reader.messages()]
+    assert [t for t, _ in got] == [5, 6]
+    assert all(m == message for _, m in got)
+
+
+def test_writer_errors_name_the_bag(tmp_path: Path) -> None:
+    (tmp_path / "exists").mkdir()
+    with (
+        pytest.raises(BagError, match=r"exists: cannot create the bag"),
+        BagWriter(tmp_path / "exists"),
+    ):
+        pass
+    bag = tmp_path / "bag"
+    with BagWriter(bag) as writer:
+        writer.add_topic("/m", MOTOR_STATE)
+        with pytest.raises(BagError, match=rf"{bag}: topic /m is .*MotorState, not .*JointState"):
+            writer.add_topic("/m", JOINT_STATE)
+        with pytest.raises(BagError, match="unknown message type pkg/msg/Nope"):
+            writer.add_topic("/x", "pkg/msg/Nope")
+        with pytest.raises(BagError, match=r"topic /y was not added"):
+            writer.write_cdr("/y", 0, b"")
+        with pytest.raises(BagError, match=r"log times must be integers in \[0, 2\*\*63 - 1\)"):
+            writer.write_cdr("/m", -1, b"")
+        with pytest.raises(BagError, match="got a sensor_msgs/msg/JointState"):
+            writer.write("/m", 0, typestore().types[JOINT_STATE](None, [], [], [], []))
+        bad = motor_samples(20)
+        bad.stamp_s[3] = 5e9
+        with pytest.raises(BagError, match=r"/motor_state: 1 finite stamp\(s\) outside"):
+            write_motor_states(writer, bad)
+        with pytest.raises(BagError, match="receive_time_ns has shape"):
+            write_motor_states(writer, motor_samples(20), receive_time_ns=np.zeros(3, dtype=int))
+    with pytest.raises(BagError, match="outside the `with BagWriter` block"):
+        writer.add_topic("/late", MOTOR_STATE)
