@@ -58,11 +58,11 @@ print("ok")
 
 TYPE_HASHES = """
 import rclpy
-from prsm_health_msgs.msg import HealthEstimate, MotorState
+from prsm_health_msgs.msg import GroundTruth, HealthEstimate, MotorState
 
 rclpy.init()
 node = rclpy.create_node("type_hash_probe")
-for msg_type in (MotorState, HealthEstimate):
+for msg_type in (MotorState, HealthEstimate, GroundTruth):
     topic = "hash_" + msg_type.__name__
     node.create_publisher(msg_type, topic, 1)
     print(msg_type.__name__, node.get_publishers_info_by_topic(topic)[0].topic_type_hash)
@@ -79,7 +79,7 @@ def test_type_hashes_match_rosbags() -> None:
     """RIHS01 hashes rosbags computes from the .msg text equal the ones the typesupport reports."""
     store = get_typestore(Stores.ROS2_JAZZY)
     expected = {}
-    for name in ("MotorState", "HealthEstimate"):
+    for name in ("MotorState", "HealthEstimate", "GroundTruth"):
         typename = f"prsm_health_msgs/msg/{name}"
         store.register(get_types_from_msg((MSG_DIR / f"{name}.msg").read_text(), typename))
         expected[name] = store.hash_rihs01(typename)
