@@ -6,7 +6,8 @@
   (the angle is floored to a whole count; 0: the exact angle).
 - Speed: the drive's estimate, the encoder position differenced over one sample and low-pass
   filtered (first order, ``speed_filter_hz``), plus white noise ``speed_noise_std_rad_s``; with
-  ``speed_filter_hz: 0`` the true motor speed plus that noise.
+  ``speed_filter_hz: 0`` the true motor speed plus that noise. Reported in steps of
+  ``speed_quantum_rad_s`` (a drive's integer speed register; 0: not quantised).
 - Header stamps: the sample time plus Gaussian jitter ``stamp_jitter_s``, truncated at
   +-0.4 sample periods (stamps stay in order unless a fault moves them).
 - Receive time (the bag's log time): the recorder's clock, sample time + ``receive_latency_s``
@@ -47,6 +48,7 @@ class Sensors:
     encoder_counts_per_rev: int = 4096
     speed_filter_hz: float = 200.0
     speed_noise_std_rad_s: float = 0.1
+    speed_quantum_rad_s: float = 0.001
     stamp_jitter_s: float = 20e-6
     receive_latency_s: float = 0.002
     receive_jitter_s: float = 0.0005
@@ -57,6 +59,7 @@ class Sensors:
             "current_quantum_a",
             "speed_filter_hz",
             "speed_noise_std_rad_s",
+            "speed_quantum_rad_s",
             "stamp_jitter_s",
             "receive_latency_s",
             "receive_jitter_s",
@@ -134,6 +137,8 @@ class SensorModel:
         else:
             speed = motor_speed_rad_s
         speed = speed + s.speed_noise_std_rad_s * self._speed_noise.take(start, stop)
+        if s.speed_quantum_rad_s > 0.0:
+            speed = np.round(speed / s.speed_quantum_rad_s) * s.speed_quantum_rad_s
         limit = JITTER_LIMIT * self._period_s
         jitter = np.clip(s.stamp_jitter_s * self._jitter.take(start, stop), -limit, limit)
         delay = s.receive_latency_s + s.receive_jitter_s * np.abs(self._receive.take(start, stop))

@@ -47,7 +47,6 @@ def test_bundled_scene_contents_match_their_descriptions() -> None:
     assert isinstance(load_scene("stationary-hold").profile, HoldProfile)
     assert load_scene("accelerated-wear").wear.prior_sigma_ln == 0.5
     faults = load_scene("sensor-faults")
-    assert faults.joint_states
     assert faults.sensor_faults.time_jumps[0].jump_s < 0.0
     assert any(isinstance(f, NonFinite) for f in faults.sensor_faults.nonfinite)
     assert isinstance(load_scene("nominal-downhole").profile, DownholeCycle)

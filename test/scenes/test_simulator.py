@@ -26,6 +26,7 @@ IDEAL_SENSORS = Sensors(
     encoder_counts_per_rev=0,
     speed_filter_hz=0.0,
     speed_noise_std_rad_s=0.0,
+    speed_quantum_rad_s=0.0,
     stamp_jitter_s=0.0,
     receive_latency_s=0.0,
     receive_jitter_s=0.0,
