@@ -23,7 +23,7 @@ REQS_STAMP := $(VENV)/.stamp-requirements
 MSGS_STAMP := $(VENV)/.stamp-msgs
 EDITABLE_STAMP := $(VENV)/.stamp-editable
 
-.PHONY: venv lint test demo clean
+.PHONY: venv lint test demo clean bags bags-check
 
 venv: $(MSGS_STAMP) $(EDITABLE_STAMP)
 
@@ -69,6 +69,27 @@ test: venv lint
 demo: export ROS_DOMAIN_ID ?= 42
 demo: venv
 	$(VENV)/bin/prsm-health demo
+
+# The bundled bags (bags/README.md): regenerate every one, then check that a second
+# regeneration is byte-identical (cmp of metadata.yaml and the .mcap of each bag).
+BAG_SCENES := nominal-downhole sudden-jam radial-misalignment stationary-hold accelerated-wear sensor-faults
+BAG_CHECK_DIR := $(BUILD)/bags-check
+
+bags: venv
+	for scene in $(BAG_SCENES); do \
+	  $(VENV)/bin/prsm-health simulate --scene $$scene --out bags/$$scene --force; \
+	done
+	$(MAKE) bags-check
+
+bags-check: venv
+	rm -rf $(BAG_CHECK_DIR)
+	mkdir -p $(BAG_CHECK_DIR)
+	for scene in $(BAG_SCENES); do \
+	  $(VENV)/bin/prsm-health simulate --scene $$scene --out $(BAG_CHECK_DIR)/$$scene; \
+	  cmp bags/$$scene/metadata.yaml $(BAG_CHECK_DIR)/$$scene/metadata.yaml; \
+	  cmp bags/$$scene/$$scene.mcap $(BAG_CHECK_DIR)/$$scene/$$scene.mcap; \
+	done
+	@echo "bags: all $(words $(BAG_SCENES)) regenerate byte for byte"
 
 clean:
 	rm -rf $(VENV) $(BUILD) install log .pytest_cache .mypy_cache .ruff_cache *.egg-info

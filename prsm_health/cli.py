@@ -3,6 +3,7 @@
 Subcommands:
   model   evaluate the PRSM physics at one operating point (table or --json)
   demo    the model for every bundled preset at its paper's largest load
+  simulate  run a scene of the truth simulator into a rosbag2 MCAP bag
 Units at this edge are the engineers' ones (N, rpm, arcmin, mm, um/h); inside all is SI.
 """
 
@@ -14,13 +15,19 @@ import json
 import math
 import sys
 from collections.abc import Sequence
+from pathlib import Path
 from typing import Any, NoReturn
+
+from tqdm import tqdm
 
 from prsm_health.physics.errors import PhysicsError
 from prsm_health.physics.geometry import Misalignment
 from prsm_health.physics.load_distribution import LoadingCase
 from prsm_health.physics.model import ModelResult, OperatingPoint, evaluate
 from prsm_health.physics.presets import PRESET_NAMES, load_preset
+from prsm_health.scenes.recording import record
+from prsm_health.scenes.scene import load_scene, scene_names
+from prsm_health.scenes.simulator import Simulator
 
 EXIT_USAGE = 2
 RPM_TO_RAD_S = 2.0 * math.pi / 60.0
@@ -73,6 +80,22 @@ def _build_parser() -> _Parser:
         help="override the preset's wear law (004 Archard or 001 fractal)",
     )
     model.add_argument("--json", action="store_true", help="print one JSON object")
+
+    simulate = commands.add_parser("simulate", help="simulate a scene into an MCAP bag")
+    simulate.add_argument(
+        "--scene", required=True, help=f"one of {', '.join(scene_names())}, or a YAML file"
+    )
+    simulate.add_argument("--duration", type=_finite, metavar="S", help="override duration_s")
+    simulate.add_argument("--rate", type=_finite, metavar="HZ", help="override rate_hz")
+    simulate.add_argument("--seed", type=int, metavar="N", help="override the seed")
+    simulate.add_argument(
+        "--joint-states", action="store_true", help="also write /joint_states (JointState)"
+    )
+    simulate.add_argument(
+        "--exact", action="store_true", help="physics core at every sample (slow), no table"
+    )
+    simulate.add_argument("--out", required=True, type=Path, metavar="PATH", help="bag directory")
+    simulate.add_argument("--force", action="store_true", help="replace an existing bag at PATH")
 
     commands.add_parser("demo", help="model every bundled preset at its largest paper load")
     return parser
@@ -162,12 +185,44 @@ def _run_demo() -> int:
     return 0
 
 
+def _remove_bag(path: Path) -> None:
+    """Delete the bag directory ``path`` (--force); refuse anything that is not a bag."""
+    files = list(path.iterdir()) if path.is_dir() else []
+    if not files or any(f.name != "metadata.yaml" and f.suffix != ".mcap" for f in files):
+        raise ValueError(f"--force: {path} is not a bag directory (metadata.yaml, *.mcap)")
+    for file in files:
+        file.unlink()
+    path.rmdir()
+
+
+def _run_simulate(args: argparse.Namespace) -> int:
+    scene = load_scene(args.scene)
+    overrides = {
+        "duration_s": args.duration,
+        "rate_hz": args.rate,
+        "seed": args.seed,
+        "joint_states": True if args.joint_states else None,
+    }
+    scene = dataclasses.replace(scene, **{k: v for k, v in overrides.items() if v is not None})
+    if args.out.exists() or args.out.is_symlink():
+        if not args.force:
+            raise ValueError(f"{args.out} exists (use --force to replace a bag)")
+        _remove_bag(args.out)
+    simulator = Simulator(scene, exact=True if args.exact else None)
+    with tqdm(total=scene.samples, unit="sample", unit_scale=True, disable=None) as bar:
+        motor, truth = record(simulator, args.out, progress=bar.update)
+    print(f"{args.out}: scene {scene.name}, {motor} motor samples, {truth} truth samples")
+    return 0
+
+
 def main(argv: Sequence[str] | None = None) -> int:
     """Run ``prsm-health``; physics errors become a one-line message and exit code 2."""
     args = _build_parser().parse_args(argv)
     try:
         if args.command == "model":
             return _run_model(args)
+        if args.command == "simulate":
+            return _run_simulate(args)
         return _run_demo()
     except (PhysicsError, ValueError) as exc:
         print(f"prsm-health: error: {exc}", file=sys.stderr)

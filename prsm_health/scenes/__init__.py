@@ -1,1 +1,1 @@
-"""Truth simulator: scene files, the actuator's motion, loads, faults and sensors (docs/scenes.md)."""
+"""Truth simulator: scene files, the actuator's motion, loads, faults, sensors (docs/scenes.md)."""

@@ -1,0 +1,134 @@
+"""The bundled bags: both readers decode them, they are small, and their scenes regenerate them."""
+
+from __future__ import annotations
+
+import shutil
+from pathlib import Path
+
+import numpy as np
+import pytest
+from mcap.reader import make_reader
+from mcap_ros2.decoder import DecoderFactory
+from rosbags.highlevel import AnyReader
+
+from prsm_health.bags.errors import BagError
+from prsm_health.bags.reader import InputTopics, read_motor_samples, read_truth
+from prsm_health.bags.typestore import typestore
+from prsm_health.cli import main
+from prsm_health.scenes.scene import load_scene, scene_names
+
+BAGS = Path(__file__).resolve().parents[2] / "bags"
+TOPICS = {
+    "/motor_state": "prsm_health_msgs/msg/MotorState",
+    "/truth/state": "prsm_health_msgs/msg/GroundTruth",
+}
+MAX_BYTES = 3 * 1024 * 1024
+
+
+def test_every_bundled_scene_has_its_bag_and_a_readme_section() -> None:
+    readme = (BAGS / "README.md").read_text(encoding="utf-8")
+    assert sorted(p.name for p in BAGS.iterdir() if p.is_dir()) == list(scene_names())
+    for name in scene_names():
+        assert f"## {name}\n" in readme
+        assert f"prsm-health simulate --scene {name} --out bags/{name} --force" in readme
+
+
+@pytest.mark.parametrize("name", scene_names())
+def test_bundled_bag_decodes_with_rosbags_and_mcap(name: str) -> None:
+    bag = BAGS / name
+    assert sum(f.stat().st_size for f in bag.iterdir()) <= MAX_BYTES
+    scene = load_scene(name)
+    samples = read_motor_samples(bag)
+    truth = read_truth(bag)
+    dropped = sum(round(d.duration_s * scene.rate_hz) for d in scene.sensor_faults.dropouts)
+    assert len(samples) == scene.samples - dropped
+    assert len(truth) == scene.samples // scene.truth_decimation
+    assert np.all(np.diff(truth.jammed_rollers) >= 0)
+    assert np.all(np.diff(truth.precision_loss_m) >= 0.0)
+
+    with AnyReader([bag], default_typestore=typestore()) as reader:
+        assert {c.topic: c.msgtype for c in reader.connections} == TOPICS
+        current = [
+            reader.deserialize(raw, c.msgtype).current_a
+            for c, _, raw in reader.messages()
+            if c.topic == "/motor_state"
+        ]
+    np.testing.assert_array_equal(np.array(current), samples.current_a)
+
+    loads = []
+    with (bag / f"{name}.mcap").open("rb") as stream:
+        mcap = make_reader(stream, decoder_factories=[DecoderFactory()])
+        for schema, channel, _, message in mcap.iter_decoded_messages():
+            assert (schema.name, schema.encoding) == (TOPICS[channel.topic], "ros2msg")
+            if channel.topic == "/truth/state":
+                loads.append(message.axial_load_n)
+    np.testing.assert_array_equal(np.array(loads), truth.axial_load_n)
+
+
+def test_a_bundled_bag_is_what_its_scene_regenerates(tmp_path: Path) -> None:
+    name = "stationary-hold"
+    out = tmp_path / name
+    assert main(["simulate", "--scene", name, "--out", str(out)]) == 0
+    for file in ("metadata.yaml", f"{name}.mcap"):
+        assert (out / file).read_bytes() == (BAGS / name / file).read_bytes(), file
+
+
+def test_simulate_writes_joint_states_and_refuses_to_overwrite(
+    tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    out = tmp_path / "short"
+    argv = ["simulate", "--scene", "nominal-downhole", "--duration", "3", "--out", str(out)]
+    assert main([*argv, "--joint-states", "--seed", "9"]) == 0
+    motor = read_motor_samples(out)
+    joints = read_motor_samples(out, InputTopics(joint_states="/joint_states"))
+    assert len(motor) == 3000
+    for field in ("current_a", "speed_rad_s", "position_rad"):
+        np.testing.assert_array_equal(getattr(joints, field), getattr(motor, field))
+    capsys.readouterr()
+    assert main(argv) == 2
+    assert f"{out} exists" in capsys.readouterr().err
+    assert main([*argv, "--force"]) == 0
+    assert len(read_motor_samples(out)) == 3000
+    (tmp_path / "notes").mkdir()
+    (tmp_path / "notes" / "keep.txt").write_text("mine", encoding="utf-8")
+    assert (
+        main(
+            [
+                "simulate",
+                "--scene",
+                "nominal-downhole",
+                "--duration",
+                "1",
+                "--force",
+                "--out",
+                str(tmp_path / "notes"),
+            ]
+        )
+        == 2
+    )
+    assert "not a bag directory" in capsys.readouterr().err
+    assert (tmp_path / "notes" / "keep.txt").exists()
+
+
+def test_simulate_reports_a_bad_scene_in_one_line(
+    tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    scene = tmp_path / "bad.yaml"
+    scene.write_text(
+        "name: bad\nactuator: {preset: dong2022-downhole}\nduration_s: -1\n"
+        "profile: {type: constant}\n",
+        encoding="utf-8",
+    )
+    assert main(["simulate", "--scene", str(scene), "--out", str(tmp_path / "b")]) == 2
+    err = capsys.readouterr().err
+    assert err.count("\n") == 1 and f"{scene}: duration_s" in err
+    assert not (tmp_path / "b").exists()
+
+
+def test_a_truncated_bag_is_refused_naming_the_file(tmp_path: Path) -> None:
+    bag = tmp_path / "sudden-jam"
+    shutil.copytree(BAGS / "sudden-jam", bag)
+    mcap = bag / "sudden-jam.mcap"
+    mcap.write_bytes(mcap.read_bytes()[: mcap.stat().st_size // 2])
+    with pytest.raises(BagError, match=str(mcap)):
+        read_truth(bag)
