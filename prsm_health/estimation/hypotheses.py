@@ -7,7 +7,7 @@ Bar-Shalom (the equations of filterpy's ``IMMEstimator``):
 1. mixing: c_j = sum_i pi_ij mu_i, x0_j = sum_i pi_ij mu_i x_i / c_j, P0_j likewise plus the
    spread of the means; jams only ever increase, so pi is upper bidiagonal over one block:
    pi_{k,k} = 1 - p, pi_{k,k+1} = p with p = 1 - exp(-rate dt). A jump k -> k + 1 adds a
-   ripple of unknown phase: its covariance (harmonic_prior_std_nm^2 on c and s) is added;
+   ripple of unknown phase: its covariance (ripple_prior_std^2 on c and s) is added;
 2. each filter predicts and updates (filterpy ``ExtendedKalmanFilter`` or
    ``UnscentedKalmanFilter``; Joseph-form covariance update in the EKF);
 3. mu_j proportional to c_j times the measurement likelihood N(y; 0, S_j). At standstill the
@@ -32,7 +32,9 @@ from numpy.typing import NDArray
 from prsm_health.estimation.inputs import Block
 from prsm_health.estimation.measurement import (
     LOAD,
+    LOAD_ACCELERATION,
     LOAD_RATE,
+    LOAD_STATES,
     RIPPLE_COS,
     Prediction,
     TorqueModel,
@@ -97,19 +99,20 @@ class JamHypotheses:
         rated = params.rated_load_n
         initial = np.zeros(self._dim)
         initial[LOAD] = rated**2
-        initial[LOAD_RATE] = (rated / 1.0) ** 2
-        if self._dim == 4:
-            initial[RIPPLE_COS:] = params.model.harmonic_prior_std_nm**2
+        initial[LOAD_RATE] = rated**2  # the full load within a second
+        initial[LOAD_ACCELERATION] = (10.0 * rated) ** 2  # ... or within a third of a second
+        self._ripple = model.ripple
+        if self._ripple:
+            initial[RIPPLE_COS:] = params.model.ripple_prior_std**2
         self._initial_var = initial
         self._floor = initial * VARIANCE_FLOOR_RATIO
         self._jump_cov = np.zeros((self._dim, self._dim))
-        if self._dim == 4:
-            self._jump_cov[RIPPLE_COS:, RIPPLE_COS:] = (
-                np.eye(2) * params.model.harmonic_prior_std_nm**2
-            )
+        if self._ripple:
+            self._jump_cov[RIPPLE_COS:, RIPPLE_COS:] = np.eye(2) * params.model.ripple_prior_std**2
         start = params.model.initial_jammed_rollers
         self.filters: dict[int, Filter] = {}
         self.log_prob: dict[int, float] = {}
+        self._onset_weight: dict[int, float] = {}
         counts = [start] if self._prune else list(range(self.n_rollers + 1))
         for k in counts:
             self.filters[k] = self._new_filter(np.zeros(self._dim), np.diag(initial))
@@ -131,14 +134,22 @@ class JamHypotheses:
         return kf
 
     def _process(self, jammed: int, dt: float) -> tuple[FloatArray, FloatArray]:
-        """Transition matrix and process noise over dt (constant-rate load, random-walk ripple)."""
+        """Transition and process noise over dt: the load as a white-jerk (constant
+        acceleration) process, the ripple as a random walk (only when jammed)."""
         transition = np.eye(self._dim)
-        transition[LOAD, LOAD_RATE] = dt
-        q = self._params.model.load_acceleration_psd_n2_per_s3
+        transition[LOAD, LOAD_RATE] = transition[LOAD_RATE, LOAD_ACCELERATION] = dt
+        transition[LOAD, LOAD_ACCELERATION] = dt**2 / 2.0
+        q = self._params.model.load_jerk_psd_n2_per_s5
         noise = np.zeros((self._dim, self._dim))
-        noise[:2, :2] = q * np.array([[dt**3 / 3.0, dt**2 / 2.0], [dt**2 / 2.0, dt]])
-        if self._dim == 4 and jammed:
-            walk = self._params.model.harmonic_random_walk_nm_per_sqrt_s
+        noise[:LOAD_STATES, :LOAD_STATES] = q * np.array(
+            [
+                [dt**5 / 20.0, dt**4 / 8.0, dt**3 / 6.0],
+                [dt**4 / 8.0, dt**3 / 3.0, dt**2 / 2.0],
+                [dt**3 / 6.0, dt**2 / 2.0, dt],
+            ]
+        )
+        if self._ripple and jammed:
+            walk = self._params.model.ripple_random_walk_per_sqrt_s
             noise[RIPPLE_COS:, RIPPLE_COS:] = np.eye(2) * walk**2 * dt
         return transition, noise
 
@@ -159,6 +170,7 @@ class JamHypotheses:
         if top < self.n_rollers and top + 1 not in self.filters:
             targets.append(top + 1)
         mixed: dict[int, tuple[FloatArray, FloatArray, float]] = {}
+        self._onset_weight = {}
         for j in targets:
             sources = []
             if j in self.filters:
@@ -173,6 +185,9 @@ class JamHypotheses:
                 mixed[j] = (kf.x.copy(), kf.P.copy(), -math.inf)
                 continue
             weights = np.exp(logs - total)
+            self._onset_weight[j] = sum(
+                float(w) for w, s in zip(weights, sources, strict=True) if s[2]
+            )
             x0 = sum(w * s[1].x for w, s in zip(weights, sources, strict=True))
             p0 = np.zeros((self._dim, self._dim))
             for w, (_, kf, jump) in zip(weights, sources, strict=True):
@@ -202,16 +217,15 @@ class JamHypotheses:
             else:
                 kf.F, kf.Q = transition, noise
                 kf.predict()
-            prediction = self._model.predict(kf.x, block, k)
-            jacobian = prediction.jacobian[None, :]
-            variance = prediction.variance_nm2
+            onset = self._onset_weight.get(k, 0.0)
+            mean, jacobian, variance = self._measurement(kf.x, block, k, onset)
             if isinstance(kf, UnscentedKalmanFilter):
-                kf.update(z, R=np.array([[variance]]), hx=self._hx(block, k))
+                kf.update(z, R=np.array([[variance]]), hx=self._hx(block, k, onset))
             else:
                 kf.update(
                     z,
-                    HJacobian=_constant(jacobian),
-                    Hx=_constant(np.array([prediction.motor_torque_nm])),
+                    HJacobian=_constant(jacobian[None, :]),
+                    Hx=_constant(np.array([mean])),
                     R=np.array([[variance]]),
                 )
             innovation = float(kf.y[0])
@@ -232,9 +246,31 @@ class JamHypotheses:
             self._drop_unlikely()
         return StepResult(predictions=predictions, nis=nis, gated=gated)
 
-    def _hx(self, block: Block, jammed: int) -> Any:
+    def _measurement(
+        self, x: FloatArray, block: Block, jammed: int, onset: float
+    ) -> tuple[float, FloatArray, float]:
+        """Predicted torque, its Jacobian and variance for hypothesis ``jammed``.
+
+        ``onset`` is the share of the hypothesis' probability that arrives by a jam in this
+        block. Such a jam starts at a uniformly random instant inside the block, so the block
+        mean lies between the two counts' torques: with D the difference, the prediction
+        moves by -onset D / 2 and the variance grows by onset D^2 / 12 plus the spread of the
+        two-part mixture onset (1 - onset) D^2 / 4. Without this, the block in which a jam
+        starts would be explained by the new hypothesis' ripple states and corrupt them.
+        """
+        prediction = self._model.predict(x, block, jammed)
+        if onset <= 0.0:
+            return prediction.motor_torque_nm, prediction.jacobian, prediction.variance_nm2
+        before = self._model.predict(x, block, jammed - 1)
+        step = prediction.motor_torque_nm - before.motor_torque_nm
+        mean = prediction.motor_torque_nm - 0.5 * onset * step
+        jacobian = prediction.jacobian - 0.5 * onset * (prediction.jacobian - before.jacobian)
+        variance = prediction.variance_nm2 + step**2 * (onset / 12.0 + onset * (1.0 - onset) / 4.0)
+        return mean, jacobian, variance
+
+    def _hx(self, block: Block, jammed: int, onset: float) -> Any:
         def hx(x: FloatArray) -> FloatArray:
-            return np.array([self._model.predict(x, block, jammed).motor_torque_nm])
+            return np.array([self._measurement(x, block, jammed, onset)[0]])
 
         return hx
 
@@ -272,10 +308,10 @@ class JamHypotheses:
         self._normalise()
 
     def reinitialise_load(self) -> None:
-        """Forget the load and its rate (after a time reset, a gap or a divergence)."""
+        """Forget the load and its derivatives (after a time reset or a divergence)."""
         for kf in self.filters.values():
             p = kf.P.copy()
-            for i in (LOAD, LOAD_RATE):
+            for i in range(LOAD_STATES):
                 p[i, :] = 0.0
                 p[:, i] = 0.0
                 p[i, i] = self._initial_var[i]

@@ -69,10 +69,14 @@ class Block:
     stamp_s: mean stamp. duration_s: time since the previous block's mean stamp (the filter's
     prediction step, across a gap too; the grid period for the first block of a time line).
     motor_torque_nm: k_t times the mean current. motor_speed_rad_s, motor_acceleration_rad_s2:
-    mean speed and its least squares slope over the block. carrier_cos, carrier_sin: means of
-    cos and sin of the carrier angle (exact averaging of the carrier-frequency ripple).
+    mean speed, and the speed change over the block's span divided by that span.
+    carrier_cos, carrier_sin: means of cos and sin of the carrier angle (exact averaging of
+    the carrier-frequency ripple).
     direction: +1 or -1 when every sample moves that way faster than the standstill speed,
-    else 0 (standstill or reversing). after_gap, time_reset: the block starts a new time line.
+    else 0 (standstill or reversing). current_residual_var_a2: variance of the current about
+    its straight-line trend in the block (a step inside the block, e.g. the onset of a jam,
+    makes it large; the measurement noise uses it). after_gap, time_reset: the block starts a
+    new time line.
     """
 
     stamp_s: float
@@ -84,6 +88,7 @@ class Block:
     carrier_cos: float
     carrier_sin: float
     direction: int
+    current_residual_var_a2: float = 0.0
     after_gap: bool = False
     time_reset: bool = False
 
@@ -106,6 +111,7 @@ def merge_blocks(blocks: list[Block]) -> Block:
         carrier_cos=mean("carrier_cos"),
         carrier_sin=mean("carrier_sin"),
         direction=directions.pop() if len(directions) == 1 else 0,
+        current_residual_var_a2=mean("current_residual_var_a2"),
         after_gap=blocks[0].after_gap,
         time_reset=blocks[0].time_reset,
     )
@@ -290,18 +296,23 @@ class SampleBlocker:
         def means(x: FloatArray) -> FloatArray:
             return np.asarray(np.add.reduceat(x, starts) / counts, dtype=np.float64)
 
-        mean_t, mean_w = means(t), means(w)
+        mean_t, mean_w, mean_i = means(t), means(w), means(run.current_a)
         variance_t = means(t * t) - mean_t**2
-        covariance = means(t * w) - mean_t * mean_w
-        slope = np.divide(
-            covariance, variance_t, out=np.zeros_like(mean_t), where=variance_t > 1e-12
-        )
+        spread = variance_t > 1e-12
+        # The mean acceleration over the block is the speed change over its span (a least
+        # squares slope would miss an acceleration that starts or stops inside the block).
+        last = np.r_[starts[1:], len(run)] - 1
+        span = t[last]
+        slope = np.divide(w[last] - w[starts], span, out=np.zeros_like(span), where=span > 0.0)
+        covariance_ti = means(t * run.current_a) - mean_t * mean_i
+        trend = np.divide(covariance_ti**2, variance_t, out=np.zeros_like(mean_t), where=spread)
+        residual_var = np.maximum(means(run.current_a**2) - mean_i**2 - trend, 0.0)
         threshold = self._params.filter.standstill_speed_rad_s
         direction = (np.minimum.reduceat(w, starts) > threshold).astype(np.int64) - (
             np.maximum.reduceat(w, starts) < -threshold
         ).astype(np.int64)
         stamps = t0 + mean_t
-        torque = means(run.current_a) * self._torque_constant
+        torque = mean_i * self._torque_constant
         cos_mean, sin_mean = means(np.cos(angle)), means(np.sin(angle))
         new_line = np.add.reduceat(gap_before.astype(np.int64), starts) > 0
         self.counters.gaps += int(np.count_nonzero(new_line))
@@ -324,6 +335,7 @@ class SampleBlocker:
                     carrier_cos=float(cos_mean[b]),
                     carrier_sin=float(sin_mean[b]),
                     direction=int(direction[b]),
+                    current_residual_var_a2=float(residual_var[b]),
                     after_gap=bool(new_line[b]),
                     time_reset=reset,
                 )

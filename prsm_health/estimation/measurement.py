@@ -1,11 +1,14 @@
 """The measurement model: the motor torque a block should show, given the state and a jam count.
 
-State x = [F, dF/dt] or, with the ripple terms, [F, dF/dt, c, s]: the signed axial load F
-(> 0 resists positive rotation) and its rate, and the carrier-harmonic torque c cos(theta) +
-s sin(theta) of the jammed rollers (theta the carrier angle from the motor position). With k
-jammed rollers, a block moving in direction d = +-1 at screw speed w:
+State x = [F, dF/dt, d2F/dt2] or, with the ripple terms, [F, dF/dt, d2F/dt2, c, s]: the
+signed axial load F (> 0 resists positive rotation) and its first two derivatives, and the
+carrier-frequency ripple of the jammed rollers, c cos(theta) + s sin(theta) (theta the carrier
+angle from the motor position), relative to a load-dependent scale S(F) that grows with |F| and
+saturates (RIPPLE_KNEE_FRACTION). With k jammed rollers, a block moving in direction d = +-1
+at screw speed w:
 
-    T_screw = F L / 2 pi + d (M_k(|F|, |w|) + c <cos theta> + s <sin theta>)       (002 eq. 19)
+    T_screw = F L/2pi + d (M_k(|F|, |w|) + S(F) (c <cos theta> + s <sin theta>))
+                                                                    (002 eq. 12-19, lead L)
     T_motor = J_total alpha + (T_screw + d (1 - eta_g)/eta_g |T_screw|) / G    (actuator.py)
 
 with M_k of :mod:`prsm_health.estimation.surrogate` and <.> the block means. At standstill
@@ -40,7 +43,16 @@ from prsm_health.physics.load_distribution import LoadingCase
 
 FloatArray = NDArray[np.float64]
 
-LOAD, LOAD_RATE, RIPPLE_COS, RIPPLE_SIN = range(4)
+#: State layout: the load and its first two derivatives, then the ripple (when modelled).
+LOAD, LOAD_RATE, LOAD_ACCELERATION, RIPPLE_COS, RIPPLE_SIN = range(5)
+LOAD_STATES = 3
+
+#: The ripple grows with the load up to this fraction of the rated load and stays at its size
+#: beyond: a jammed roller's ripple comes from the radial load (the borehole wall, 000) or the
+#: misalignment (004), which do not grow with the axial load, but the loaded flank can only
+#: carry a radial load below about the axial load (load_distribution.radial_capacity_ratio),
+#: so it vanishes with the axial load. scale = |F| L/2pi / sqrt(1 + (F / knee)^2).
+RIPPLE_KNEE_FRACTION = 0.2
 
 
 @dataclass(frozen=True)
@@ -71,15 +83,18 @@ class TorqueModel:
         preset = actuator.preset
         drive = actuator.drive_train
         self.n_rollers = preset.geometry.n_rollers
-        self.dim = 4 if params.radial_terms else 2
+        self.ripple = params.radial_terms
+        self.dim = RIPPLE_SIN + 1 if self.ripple else LOAD_STATES
         self._load_arm_m = preset.geometry.lead_m / (2.0 * math.pi)
         self._gear_ratio = drive.gear_ratio
         self._gear_loss = (1.0 - drive.gear_efficiency) / drive.gear_efficiency
         self._inertia = drive.inertia_at_motor_kg_m2
-        self._wear_scale = actuator.wear_acceleration
+        self._ripple_knee_n = RIPPLE_KNEE_FRACTION * params.rated_load_n
+        self._wear_scale = actuator.wear_acceleration * params.model.wear_coefficient_factor
         self._actuator = actuator
         noise = params.noise
-        self._current_var = (drive.torque_constant_nm_per_a * noise.current_std_a) ** 2
+        self._torque_constant = drive.torque_constant_nm_per_a
+        self._current_var = noise.current_std_a**2
         self._accel_var_per_sample = (
             12.0 * noise.speed_std_rad_s**2 / params.filter.block_duration_s**2
         )
@@ -116,11 +131,18 @@ class TorqueModel:
             screw_torque = load * self._load_arm_m + direction * friction
             d_screw_d_load = self._load_arm_m + direction * math.copysign(friction_slope, load)
             band_var = 0.0
-            if self.dim == 4 and jammed:
-                ripple = x[RIPPLE_COS] * block.carrier_cos + x[RIPPLE_SIN] * block.carrier_sin
-                screw_torque += direction * float(ripple)
-                jacobian[RIPPLE_COS] = direction * block.carrier_cos
-                jacobian[RIPPLE_SIN] = direction * block.carrier_sin
+            if self.ripple and jammed:
+                # The ripple scales with the load torque: c, s are relative amplitudes.
+                relative = float(
+                    x[RIPPLE_COS] * block.carrier_cos + x[RIPPLE_SIN] * block.carrier_sin
+                )
+                root = math.sqrt(1.0 + (load / self._ripple_knee_n) ** 2)
+                scale = abs(load) * self._load_arm_m / root
+                d_scale = math.copysign(self._load_arm_m, load) / root**3
+                screw_torque += direction * scale * relative
+                d_screw_d_load += direction * d_scale * relative
+                jacobian[RIPPLE_COS] = direction * scale * block.carrier_cos
+                jacobian[RIPPLE_SIN] = direction * scale * block.carrier_sin
         else:
             friction = static
             screw_torque = load * self._load_arm_m
@@ -133,7 +155,9 @@ class TorqueModel:
         jacobian[LOAD] = gear * d_screw_d_load
         jacobian[RIPPLE_COS:] *= gear
         variance = (
-            self._current_var / block.samples
+            self._torque_constant**2
+            * max(self._current_var, block.current_residual_var_a2)
+            / block.samples
             + self._inertia**2 * self._accel_var_per_sample / block.samples
             + (self._model_rel * motor_torque) ** 2
             + self._model_floor_var

@@ -61,7 +61,7 @@ class NoiseParams:
 
     current_std_a: float = 0.05
     speed_std_rad_s: float = 0.2
-    model_error_rel: float = 0.01
+    model_error_rel: float = 0.003
     model_error_floor_nm: float = 0.005
 
     def __post_init__(self) -> None:
@@ -83,22 +83,27 @@ class ModelParams:
 
     radial_load_ratio: typical F_r / F_a (0 = no radial load; the downhole robot's wall
     contact gives about 0.15). radial_load_ratio_std: its uncertainty (enters the wear
-    rate's uncertainty). load_acceleration_psd_n2_per_s3: how fast the axial load's rate may
-    change: the white-noise density of its acceleration (the load model is a random walk on
-    dF/dt, so ramps are cheap and steps are not).
-    harmonic_random_walk_nm_per_sqrt_s: drift of the carrier-frequency torque ripple of jammed
-    rollers. harmonic_prior_std_nm: its size when a jam appears. jam_rate_per_h: prior rate of
-    a new jam. initial_jammed_rollers: jammed count known at start (after maintenance, 0).
-    wear_coefficient_sigma_ln: log-normal spread of the wear coefficient around the preset's.
+    rate's uncertainty). load_jerk_psd_n2_per_s5: how fast the axial load may change: the
+    white-noise density of its jerk (a constant-acceleration model: a smooth ramp of the
+    downhole cycle, 45 kN in 0.5 s, costs about one nat; a step in one block thousands).
+    ripple_prior_std: size of the carrier-frequency torque ripple a new jammed roller adds, per
+    cosine and sine component, relative to the load torque at the ripple knee (measurement.py;
+    0.3 for one roller with 6 kN radial load on dong2022-downhole).
+    ripple_random_walk_per_sqrt_s: its drift as the radial load changes. jam_rate_per_h: prior
+    rate of a new jam. initial_jammed_rollers: jammed count known at start (after maintenance, 0).
+    wear_coefficient_factor: the actuator's wear coefficient relative to the preset's, when
+    calibrated (1 = the preset's). wear_coefficient_sigma_ln: log-normal spread of the true
+    coefficient around that value (0.5 is the prior the scenes draw from).
     """
 
     radial_load_ratio: float = 0.15
     radial_load_ratio_std: float = 0.1
-    load_acceleration_psd_n2_per_s3: float = 1.0e10
-    harmonic_random_walk_nm_per_sqrt_s: float = 0.5
-    harmonic_prior_std_nm: float = 5.0
+    load_jerk_psd_n2_per_s5: float = 5.0e12
+    ripple_prior_std: float = 0.3
+    ripple_random_walk_per_sqrt_s: float = 0.1
     jam_rate_per_h: float = 1e-3
     initial_jammed_rollers: int = 0
+    wear_coefficient_factor: float = 1.0
     wear_coefficient_sigma_ln: float = 0.5
 
     def __post_init__(self) -> None:
@@ -108,10 +113,11 @@ class ModelParams:
             {
                 "radial_load_ratio": (0.0, 0.9),
                 "radial_load_ratio_std": (0.0, 1.0),
-                "load_acceleration_psd_n2_per_s3": (1e-3, 1e20),
-                "harmonic_random_walk_nm_per_sqrt_s": (1e-9, 1e4),
-                "harmonic_prior_std_nm": (1e-9, 1e4),
+                "load_jerk_psd_n2_per_s5": (1e-3, 1e24),
+                "ripple_prior_std": (1e-9, 10.0),
+                "ripple_random_walk_per_sqrt_s": (1e-9, 10.0),
                 "jam_rate_per_h": (1e-12, 1e6),
+                "wear_coefficient_factor": (1e-6, 1e6),
                 "wear_coefficient_sigma_ln": (0.0, 5.0),
             },
         )

@@ -35,13 +35,13 @@ def test_mixing_equals_filterpy_imm_estimator() -> None:
     mu = rng.dirichlet(np.ones(n))
     reference = []
     for k in range(n):
-        x = rng.normal(0.0, 1e3, 2)
-        a = rng.normal(0.0, 1.0, (2, 2))
-        cov = a @ a.T + np.eye(2)
+        x = rng.normal(0.0, 1e3, bank.filters[k].dim_x)
+        a = rng.normal(0.0, 1.0, (len(x), len(x)))
+        cov = a @ a.T + np.eye(len(x))
         bank.filters[k].x, bank.filters[k].P = x.copy(), cov.copy()
         bank.log_prob[k] = math.log(mu[k])
-        kf = KalmanFilter(dim_x=2, dim_z=1)
-        kf.x, kf.P, kf.Q = x.copy(), cov.copy(), np.zeros((2, 2))
+        kf = KalmanFilter(dim_x=len(x), dim_z=1)
+        kf.x, kf.P, kf.Q = x.copy(), cov.copy(), np.zeros_like(cov)
         reference.append(kf)
     dt = 0.04
     p_jump = -math.expm1(-1.0 * dt)  # jam_rate_per_h = 3600 -> 1 per second

@@ -1,0 +1,124 @@
+"""The estimator end to end on runs of the truth simulator (real physics, sensors, faults)."""
+
+from __future__ import annotations
+
+import itertools
+import math
+from typing import Any
+
+import numpy as np
+
+from prsm_health.estimation.estimate import EstimateEvent, HealthState
+from prsm_health.estimation.estimator import HealthEstimator
+from prsm_health.estimation.metrics import Metrics, score
+from prsm_health.estimation.params import EstimatorParams, ModelParams
+from prsm_health.scenes.scene import scene_from_mapping
+from prsm_health.scenes.simulator import SimulationChunk, simulate
+
+RPM = 2.0 * math.pi / 60.0
+
+
+def downhole(**changes: Any) -> dict[str, Any]:
+    document: dict[str, Any] = {
+        "name": "test-downhole",
+        "actuator": {"preset": "dong2022-downhole", "wear_acceleration": 1.0e5},
+        "duration_s": 24.0,
+        "seed": 5,
+        "profile": {
+            "type": "downhole_cycle",
+            "stroke_m": 0.1,
+            "speed_rpm": [300.0, 400.0],
+            "traction_load_n": [20000.0, 45000.0],
+            "support_s": 1.0,
+        },
+        "radial_load": {"type": "wall", "min_n": 2000.0, "max_n": 6000.0, "period_s": 6.0},
+        "load_noise": {"relative_std": 0.015, "bandwidth_hz": 0.2},
+    }
+    document.update(changes)
+    return document
+
+
+def run(document: dict[str, Any], **model: Any) -> tuple[list[HealthState], Metrics, Any]:
+    scene = scene_from_mapping(document)
+    result: SimulationChunk = simulate(scene)
+    params = EstimatorParams(actuator=scene.actuator, model=ModelParams(**model))
+    estimator = HealthEstimator(params)
+    states = estimator.process(result.motor) + estimator.finish()
+    metrics = score(
+        states,
+        result.truth,
+        rated_load_n=params.rated_load_n,
+        largest_screw_speed_rad_s=scene.actuator.preset.largest_speed_rpm * RPM,
+    )
+    return states, metrics, result
+
+
+def test_a_jam_mid_stroke_is_identified_at_once_and_the_load_stays_accurate() -> None:
+    states, metrics, _ = run(downhole(jams=[{"time_s": 4.0, "roller": 2}]))
+    (jam,) = metrics.jams
+    assert jam.delay_s is not None and jam.delay_s < 0.5
+    assert metrics.false_jam_declarations == 0
+    assert metrics.load_rmse_percent_rated < 2.0
+    assert metrics.load_nees_consistent
+    assert states[-1].jam_probabilities[1] > 0.99
+
+
+def test_a_healthy_run_declares_no_jam_and_tracks_load_and_wear() -> None:
+    states, metrics, _result = run(downhole(), wear_coefficient_factor=1.0)
+    assert metrics.false_jam_declarations == 0
+    assert max(s.jam_probability for s in states) < 1e-3
+    assert metrics.load_rmse_percent_rated < 0.5
+    assert abs(metrics.precision_loss_error_percent) < 2.0
+    assert metrics.precision_loss_coverage_2sigma == 1.0
+    losses = [s.precision_loss_m for s in states]
+    assert all(b >= a for a, b in itertools.pairwise(losses))
+
+
+def test_without_radial_load_a_jam_is_told_by_its_step() -> None:
+    document = downhole(
+        radial_load={"type": "constant", "value_n": 0.0},
+        jams=[{"time_s": 4.0, "roller": 2}],
+    )
+    _, metrics, _ = run(document, radial_load_ratio=0.0)
+    (jam,) = metrics.jams
+    assert jam.delay_s is not None and jam.delay_s < 0.5
+    assert metrics.false_jam_declarations == 0
+
+
+def test_a_jam_at_standstill_without_ripple_is_not_identifiable() -> None:
+    """The documented limit (docs/estimation.md): no radial load, no misalignment, the jam
+    during a support step. When the next stroke starts, a healthy screw at a load larger by the
+    jam's torque ratio explains the current as well as a jammed one: the count stays at the
+    prior's choice (0), and the load reads high by about that ratio (+38 % here). If this test
+    fails because the jam is found, the estimator learned something: update the docs."""
+    document = downhole(
+        radial_load={"type": "constant", "value_n": 0.0},
+        jams=[{"time_s": 13.0, "roller": 2}],  # support steps between 11.8 s and 14.5 s
+    )
+    states, _, result = run(document, radial_load_ratio=0.0)
+    truth = result.truth
+    later = [s for s in states if 16.0 < s.stamp_s < 18.0]
+    assert later and truth.jammed_rollers[-1] == 1
+    assert all(s.jammed_rollers_most_likely == 0 for s in later)
+    true_load = np.interp([s.stamp_s for s in later], truth.stamp_s, truth.axial_load_n)
+    ratio = np.array([s.axial_load_n for s in later]) / true_load
+    assert 1.3 < float(np.median(ratio)) < 1.45
+
+
+def test_sensor_faults_are_counted_and_never_reach_the_outputs() -> None:
+    document = downhole(
+        sensor_faults={
+            "dropouts": [{"start_s": 3.0, "duration_s": 0.7}],
+            "nonfinite": [{"time_s": 4.0, "field": "all", "value": float("nan"), "samples": 5}],
+            "spikes": [{"time_s": 5.0, "field": "current_a", "value": 30.0}],
+            "stuck": [{"start_s": 6.0, "duration_s": 0.3, "field": "current_a"}],
+            "time_jumps": [{"time_s": 10.0, "jump_s": -0.5}],
+        }
+    )
+    states, _, _ = run(document)
+    for s in states:
+        values = [s.axial_load_n, s.axial_load_std_n, s.precision_loss_m, s.efficiency, s.nis]
+        assert all(math.isfinite(v) for v in values)
+    last = states[-1]
+    assert last.samples_rejected >= 5 + 1 + 280
+    assert any(s.event == EstimateEvent.TIME_RESET for s in states)
