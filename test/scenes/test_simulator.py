@@ -148,6 +148,14 @@ def test_exact_mode_current_is_the_physics_core_torque_balance(
         assert float(run.motor.current_a[at]) == pytest.approx(current, rel=1e-6)
 
 
+def test_exact_mode_agrees_across_chunk_sizes_to_the_solver_tolerance() -> None:
+    scene = steady_scene(jams=(Jam(time_s=0.12, roller=1),), radial_n=5000.0, tilt=Misalignment())
+    whole = simulate(scene, exact=True).truth
+    chunked = simulate(scene, exact=True, chunk_samples=37).truth
+    np.testing.assert_allclose(chunked.friction_torque_nm, whole.friction_torque_nm, rtol=1e-9)
+    np.testing.assert_allclose(chunked.precision_loss_m, whole.precision_loss_m, rtol=1e-9)
+
+
 def test_table_mode_friction_is_within_the_table_error() -> None:
     """Bounds: test/physics/test_roller_table.py (aligned radial: 2e-4 healthy, 6e-3 jammed)."""
     scene = steady_scene(jams=(Jam(time_s=0.12, roller=1),), radial_n=5000.0, tilt=Misalignment())
