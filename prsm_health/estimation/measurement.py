@@ -32,13 +32,13 @@ from prsm_health.estimation.surrogate import (
     ROLLING,
     SLIDING,
     VISCOUS,
-    VISCOUS_SPEED_EXPONENT,
     WEAR_HEALTHY,
     WEAR_JAMMED,
     AverageModel,
     DirectPhysics,
     averaged_tables,
 )
+from prsm_health.physics.friction import VISCOUS_SPEED_EXPONENT
 from prsm_health.physics.load_distribution import LoadingCase
 
 FloatArray = NDArray[np.float64]

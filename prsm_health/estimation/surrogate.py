@@ -34,22 +34,13 @@ from typing import Protocol
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
-from prsm_health.physics.fatigue import damage_rate_per_s
-from prsm_health.physics.friction import friction_torque
+from prsm_health.physics.fatigue import damage_rate_from_peak_per_s
 from prsm_health.physics.geometry import Misalignment
-from prsm_health.physics.load_distribution import (
-    NEGLIGIBLE_LOAD_N,
-    LoadingCase,
-    solve_load_distribution,
-)
-from prsm_health.physics.meshing import meshing, slip_speed_m_s
+from prsm_health.physics.load_distribution import NEGLIGIBLE_LOAD_N, LoadingCase
 from prsm_health.physics.presets import Preset
-from prsm_health.physics.wear import wear_depth_rate_m_per_s
+from prsm_health.physics.roller_table import roller_values
 
 FloatArray = NDArray[np.float64]
-
-#: Exponent of the screw speed in the viscous torque (paper 002 eq. 5, U^0.66).
-VISCOUS_SPEED_EXPONENT = 0.66
 
 
 @dataclass(frozen=True)
@@ -82,52 +73,33 @@ def physics_averages(
 ) -> RollerAverages:
     """:class:`RollerAverages` from the physics core for each axial load (1-D array).
 
-    The average is over the N rollers at ``angles`` carrier angles in [0, 2 pi / N), i.e. over
-    N * angles evenly spaced roller position angles (exact for harmonics below that number).
+    The average of :func:`~prsm_health.physics.roller_table.roller_values` over the N rollers
+    at ``angles`` carrier angles in [0, 2 pi / N), i.e. over N * angles evenly spaced roller
+    position angles (exact for harmonics below that number).
     """
     geometry = preset.geometry
-    misalignment = misalignment or Misalignment()
-    loads = np.atleast_1d(np.asarray(axial_load_n, dtype=np.float64))
+    loads = np.atleast_1d(np.asarray(axial_load_n, dtype=np.float64))[:, None]
     theta = 2.0 * math.pi * np.arange(angles) / (angles * geometry.n_rollers)
-    meshes = [meshing(geometry, misalignment, carrier_angle_rad=float(t)) for t in theta]
-    # The clearances turn with the carrier, so each angle is one batched solve over the loads.
-    solved = [
-        solve_load_distribution(
-            geometry,
-            loads,
-            radial_load_n=radial_ratio * loads,
-            carrier_angle_rad=float(t),
-            clearance_screw_roller_m=mesh.axial_clearance_screw_roller_m,
-            clearance_roller_nut_m=mesh.axial_clearance_roller_nut_m,
-            case=case,
-        )
-        for t, mesh in zip(theta, meshes, strict=True)
-    ]
-    q_sr = np.stack([s.screw_roller_n for s in solved], axis=1)  # (loads, angles, N, Z)
-    q_rn = np.stack([s.roller_nut_n for s in solved], axis=1)
-    healthy = friction_torque(geometry, preset.friction, q_sr, q_rn, 1.0)
-    jammed = friction_torque(geometry, preset.friction, q_sr, q_rn, 1.0, jammed=geometry.n_rollers)
-    mesh = meshes[0]  # the slip speed uses the aligned contact point, the same at every angle
-    wear = [
-        wear_depth_rate_m_per_s(
-            geometry,
-            preset.wear,
-            q_sr,
-            np.asarray(slip_speed_m_s(geometry, mesh, 1.0, jammed=is_jammed))[..., None, None],
-        ).sum(axis=-1)
-        for is_jammed in (False, True)
-    ]
-    damage = damage_rate_per_s(geometry, preset.fatigue, q_sr, 1.0)
+    rollers = roller_values(
+        preset,
+        loads,
+        radial_load_n=radial_ratio * loads,
+        carrier_angle_rad=theta[None, :],
+        misalignment=misalignment,
+        case=case,
+    )  # (loads, angles, N)
+    peak = rollers.peak_contact_force_n.max(axis=-1)
+    damage = damage_rate_from_peak_per_s(geometry, preset.fatigue, peak, 1.0)
 
     def mean(per_roller: FloatArray) -> FloatArray:
         return np.asarray(per_roller.mean(axis=(1, 2)), dtype=np.float64)
 
     return RollerAverages(
-        rolling_nm=mean(healthy.hysteresis_nm + healthy.spin_nm + healthy.differential_nm),
-        viscous_nm=mean(healthy.viscous_nm),
-        sliding_nm=mean(jammed.jammed_sliding_nm),
-        wear_healthy_m=mean(wear[0]),
-        wear_jammed_m=mean(wear[1]),
+        rolling_nm=mean(rollers.rolling_torque_nm),
+        viscous_nm=mean(rollers.viscous_torque_nm),
+        sliding_nm=mean(rollers.jammed_torque_nm),
+        wear_healthy_m=mean(rollers.wear_m_per_rad),
+        wear_jammed_m=mean(rollers.jammed_wear_m_per_rad),
         damage=np.asarray(damage.mean(axis=1), dtype=np.float64),
     )
 
