@@ -1,0 +1,397 @@
+"""What the estimator's outputs contain, as plain data: ``HealthEstimate`` fields and diagnostics.
+
+ROS-free, shared by the live node (:mod:`prsm_health.ros`) and the offline replay (which writes
+the same content into MCAP through rosbags message classes), so a bag of estimates and the live
+topics cannot differ in content.
+
+``HealthEstimate``: :func:`health_estimate_fields` converts a :class:`HealthState` to the
+message's fields and units (|axial load| in N, um, um/h, probabilities). A non-finite value can
+never be published: it is replaced by a safe value and counted (see the function).
+
+Diagnostics (``diagnostic_msgs/DiagnosticStatus`` as :class:`DiagnosticStatusData`): one status
+per concern, with stable names (``STATUS_NAMES``) and key-values that are bare numbers as
+strings with the unit in the key, so that PlotJuggler and Foxglove turn them into series.
+When the inputs are older than ``stale_timeout_s`` (or never came), every estimator status is
+STALE: its message says for how long, its values are the last known ones. The persistence
+status (:func:`persistence_status`) is about the node's state file, not about the inputs, and
+is never stale.
+"""
+
+from __future__ import annotations
+
+import enum
+import math
+from collections import Counter
+from collections.abc import Mapping
+from dataclasses import dataclass
+from typing import Any
+
+from prsm_health.estimation.estimate import S_PER_H, UM_PER_M, HealthState
+from prsm_health.estimation.params import DiagnosticThresholds
+
+#: Seconds during which a divergence recovery, a time reset, a non-finite output or a
+#: processing error keeps the filter-consistency status at WARN or ERROR.
+RECENT_S = 10.0
+
+AXIAL_LOAD = "prsm_health: axial load"
+JAMMED_ROLLERS = "prsm_health: jammed rollers"
+PRECISION_LOSS = "prsm_health: precision loss"
+FATIGUE = "prsm_health: fatigue"
+INPUT_HEALTH = "prsm_health: input health"
+FILTER_CONSISTENCY = "prsm_health: filter consistency"
+PERSISTENCE = "prsm_health: persistence"
+#: The estimator statuses, in the order :func:`diagnostic_statuses` returns them.
+STATUS_NAMES = (
+    AXIAL_LOAD,
+    JAMMED_ROLLERS,
+    PRECISION_LOSS,
+    FATIGUE,
+    INPUT_HEALTH,
+    FILTER_CONSISTENCY,
+)
+
+#: Float fields of ``HealthEstimate`` that are standard deviations or values (all replaced by
+#: 0.0 when non-finite; see :func:`health_estimate_fields`).
+_FLOAT_FIELDS = (
+    "axial_load_n",
+    "axial_load_std_n",
+    "precision_loss_um",
+    "precision_loss_std_um",
+    "precision_loss_rate_um_per_h",
+    "friction_torque_nm",
+    "efficiency",
+    "fatigue_damage",
+    "fatigue_damage_std",
+    "screw_speed_rad_s",
+    "normalized_innovation_squared",
+)
+
+
+class Level(enum.IntEnum):
+    """``diagnostic_msgs/DiagnosticStatus`` levels: OK, WARN, ERROR (the estimate crossed a
+    threshold, or the node failed), STALE (no recent input)."""
+
+    OK, WARN, ERROR, STALE = range(4)
+
+
+#: A status before the name and hardware id are attached: level, message, key-values.
+_Part = tuple[Level, str, list[tuple[str, str]]]
+
+
+@dataclass(frozen=True)
+class DiagnosticStatusData:
+    """One ``DiagnosticStatus``: values are (key, bare number as a string) pairs."""
+
+    name: str
+    level: Level
+    message: str
+    hardware_id: str
+    values: list[tuple[str, str]]
+
+
+@dataclass(frozen=True)
+class InputHealth:
+    """How the inputs arrive (the content of the input-health status).
+
+    rate_hz: input messages received per second over the last second. last_sample_s: when the
+    last one arrived, on the caller's clock (the node's clock; None before the first).
+    received: messages received since start. accepted: samples the estimator accepted.
+    rejected: samples rejected, by reason (the estimator's reasons in lower case, plus the
+    caller's own, e.g. ``joint_missing``). recent_rejected_fraction: share of the samples
+    judged over the last second that were rejected.
+    """
+
+    rate_hz: float
+    last_sample_s: float | None
+    received: int
+    accepted: int
+    rejected: Mapping[str, int]
+    recent_rejected_fraction: float = 0.0
+
+
+@dataclass(frozen=True)
+class FilterEvents:
+    """What happened to the filter and to the outputs (the filter-consistency status).
+
+    Counts since start: time_resets and gaps (input stage), divergence_recoveries (estimates
+    with event DIVERGENCE_RECOVERED), non_finite_outputs (values replaced by
+    :func:`health_estimate_fields`), processing_errors (exceptions caught around the
+    estimator). last_warning_s / last_error_s: when the last time reset or recovery / the last
+    non-finite output or processing error happened (caller's clock), with a short text.
+    """
+
+    time_resets: int = 0
+    gaps: int = 0
+    divergence_recoveries: int = 0
+    non_finite_outputs: int = 0
+    processing_errors: int = 0
+    last_warning_s: float | None = None
+    last_warning: str = ""
+    last_error_s: float | None = None
+    last_error: str = ""
+
+
+@dataclass(frozen=True)
+class PersistenceHealth:
+    """The state file: where, when last saved, what happened at restore and at the last save.
+
+    restored: the estimator resumed from the file at configure. kept_corrupt: where an
+    unusable state file was moved aside (None if none was), with the reason in problem.
+    save_error: the last save failure (None after a successful save).
+    """
+
+    state_file: str
+    last_save_s: float | None = None
+    saves: int = 0
+    restored: bool = False
+    kept_corrupt: str | None = None
+    problem: str = ""
+    save_error: str | None = None
+
+
+def _finite(value: float, name: str, replaced: Counter[str] | None) -> float:
+    if math.isfinite(value):
+        return float(value)
+    if replaced is not None:
+        replaced[name] += 1
+    return 0.0
+
+
+def _probabilities(state: HealthState, replaced: Counter[str] | None) -> list[float]:
+    probabilities = [float(p) for p in state.jam_probabilities]
+    valid = bool(probabilities) and all(math.isfinite(p) and p >= 0.0 for p in probabilities)
+    if valid and sum(probabilities) > 0.0:
+        return probabilities
+    if replaced is not None:
+        replaced["jammed_rollers_probability"] += 1
+    n = max(len(probabilities), 1)
+    return [1.0 / n] * n
+
+
+def health_estimate_fields(
+    state: HealthState, *, replaced: Counter[str] | None = None
+) -> dict[str, Any]:
+    """``HealthEstimate`` field name -> value in the message's units (header excluded).
+
+    The axial load is the magnitude (the message has no sign), lengths in um, rates in um/h.
+    Safe values for what should never happen: a non-finite float becomes 0.0; non-finite or
+    negative jam probabilities become the uniform distribution ("unknown"), from which the
+    most likely count is taken. Each replacement adds 1 to ``replaced[field name]``, so the
+    caller can report it (the node's filter-consistency status turns ERROR).
+    """
+    probabilities = _probabilities(state, replaced)
+    values = {
+        "axial_load_n": abs(state.axial_load_n),
+        "axial_load_std_n": state.axial_load_std_n,
+        "precision_loss_um": state.precision_loss_m * UM_PER_M,
+        "precision_loss_std_um": state.precision_loss_std_m * UM_PER_M,
+        "precision_loss_rate_um_per_h": state.precision_loss_rate_m_per_s * UM_PER_M * S_PER_H,
+        "friction_torque_nm": state.friction_torque_nm,
+        "efficiency": state.efficiency,
+        "fatigue_damage": state.fatigue_damage,
+        "fatigue_damage_std": state.fatigue_damage_std,
+        "screw_speed_rad_s": state.screw_speed_rad_s,
+        "normalized_innovation_squared": state.nis,
+    }
+    fields: dict[str, Any] = {name: _finite(values[name], name, replaced) for name in _FLOAT_FIELDS}
+    fields["jammed_rollers_probability"] = probabilities
+    fields["jammed_rollers_most_likely"] = max(
+        range(len(probabilities)), key=probabilities.__getitem__
+    )
+    fields["samples_accepted"] = max(int(state.samples_accepted), 0)
+    fields["samples_rejected"] = max(int(state.samples_rejected), 0)
+    fields["event"] = int(state.event)
+    return fields
+
+
+def _num(value: float) -> str:
+    """A bare number for a diagnostics value (never NaN or inf: those become 0)."""
+    return f"{value:.6g}" if math.isfinite(value) else "0"
+
+
+def _numbers(values: Mapping[str, float]) -> list[tuple[str, str]]:
+    """Key-values of numbers: counts as integers, the rest as :func:`_num` does."""
+    return [
+        (key, str(value) if isinstance(value, int) else _num(value))
+        for key, value in values.items()
+    ]
+
+
+def _picked(fields: Mapping[str, Any], *names: str) -> dict[str, float]:
+    """The named fields of a HealthEstimate (as diagnostics values of the same name)."""
+    return {name: float(fields[name]) for name in names}
+
+
+def _level(value: float, warn: float, error: float) -> Level:
+    if value >= error:
+        return Level.ERROR
+    return Level.WARN if value >= warn else Level.OK
+
+
+def _rollers(count: int) -> str:
+    return f"{count} jammed roller{'s' if count != 1 else ''}"
+
+
+def _axial_load(fields: Mapping[str, Any], th: DiagnosticThresholds, rated_n: float) -> _Part:
+    load = float(fields["axial_load_n"])
+    fraction = load / rated_n
+    level = _level(fraction, th.load_warn_fraction, th.load_error_fraction)
+    message = f"{load / 1e3:.1f} kN ({100.0 * fraction:.0f} % of rated {rated_n / 1e3:.3g} kN)"
+    values = _picked(fields, "axial_load_n", "axial_load_std_n")
+    values |= {"rated_load_n": rated_n, "load_fraction_of_rated": fraction}
+    values |= _picked(fields, "friction_torque_nm", "efficiency", "screw_speed_rad_s")
+    return level, message, _numbers(values)
+
+
+def _jammed(fields: Mapping[str, Any], th: DiagnosticThresholds) -> _Part:
+    probabilities: list[float] = fields["jammed_rollers_probability"]
+    count = int(fields["jammed_rollers_most_likely"])
+    p_jam = 1.0 - probabilities[0]
+    if count >= 1:
+        level, message = Level.ERROR, f"{_rollers(count)} (p = {probabilities[count]:.2f})"
+    elif p_jam >= th.jam_warn_probability:
+        level, message = Level.WARN, f"possible jammed roller (p = {p_jam:.2f})"
+    else:
+        level, message = Level.OK, f"no jammed roller (p(jam) = {p_jam:.2g})"
+    values = {"jam_probability_any": p_jam, "jam_warn_probability": th.jam_warn_probability}
+    values.update({f"jam_probability_{k}": p for k, p in enumerate(probabilities)})
+    return level, message, [("jammed_rollers_most_likely", str(count)), *_numbers(values)]
+
+
+def _precision(fields: Mapping[str, Any], th: DiagnosticThresholds) -> _Part:
+    loss = float(fields["precision_loss_um"])
+    budget = th.precision_loss_budget_um
+    fraction = loss / budget
+    rate = float(fields["precision_loss_rate_um_per_h"])
+    level = _level(fraction, th.precision_loss_warn_fraction, th.precision_loss_error_fraction)
+    message = f"{loss:.3g} um of the {budget:g} um budget ({rate:.3g} um/h)"
+    values = _picked(
+        fields, "precision_loss_um", "precision_loss_std_um", "precision_loss_rate_um_per_h"
+    )
+    values |= {"precision_loss_budget_um": budget, "budget_fraction": fraction}
+    return level, message, _numbers(values)
+
+
+def _fatigue(fields: Mapping[str, Any], th: DiagnosticThresholds) -> _Part:
+    damage = float(fields["fatigue_damage"])
+    level = _level(damage, th.fatigue_warn_damage, th.fatigue_error_damage)
+    message = (
+        f"Miner damage {damage:.3g} (warn {th.fatigue_warn_damage:g},"
+        f" error {th.fatigue_error_damage:g})"
+    )
+    return level, message, _numbers(_picked(fields, "fatigue_damage", "fatigue_damage_std"))
+
+
+def _inputs(inputs: InputHealth, th: DiagnosticThresholds, now_s: float) -> _Part:
+    age = now_s - inputs.last_sample_s if inputs.last_sample_s is not None else math.inf
+    problems = []
+    if inputs.rate_hz < th.min_input_rate_hz:
+        problems.append(f"rate {inputs.rate_hz:.0f} Hz below {th.min_input_rate_hz:g} Hz")
+    fraction = inputs.recent_rejected_fraction
+    if fraction > 0.0 and fraction >= th.rejected_warn_fraction:
+        reasons = ", ".join(k for k, v in inputs.rejected.items() if v)
+        problems.append(f"{100.0 * fraction:.1f} % rejected in the last second ({reasons})")
+    rejected_total = sum(inputs.rejected.values())
+    message = "; ".join(problems) or (
+        f"{inputs.rate_hz:.0f} Hz, {rejected_total} rejected of {inputs.received} received"
+    )
+    values = {
+        "rate_hz": inputs.rate_hz,
+        "min_rate_hz": th.min_input_rate_hz,
+        "input_age_s": age if math.isfinite(age) else -1.0,
+        "received": inputs.received,
+        "accepted": inputs.accepted,
+        "rejected": rejected_total,
+        "recent_rejected_fraction": inputs.recent_rejected_fraction,
+    }
+    values.update({f"rejected_{reason}": count for reason, count in inputs.rejected.items()})
+    return (Level.WARN if problems else Level.OK), message, _numbers(values)
+
+
+def _recent(at_s: float | None, now_s: float) -> bool:
+    return at_s is not None and now_s - at_s <= RECENT_S
+
+
+def _consistency(fields: Mapping[str, Any] | None, events: FilterEvents, now_s: float) -> _Part:
+    nis = float(fields["normalized_innovation_squared"]) if fields is not None else 0.0
+    if _recent(events.last_error_s, now_s):
+        level, message = Level.ERROR, events.last_error
+    elif _recent(events.last_warning_s, now_s):
+        level, message = Level.WARN, events.last_warning
+    else:
+        level, message = Level.OK, f"consistent (mean NIS {nis:.2g})"
+    values = {
+        "normalized_innovation_squared": nis,
+        "time_resets": events.time_resets,
+        "gaps": events.gaps,
+        "divergence_recoveries": events.divergence_recoveries,
+        "non_finite_outputs": events.non_finite_outputs,
+        "processing_errors": events.processing_errors,
+    }
+    return level, message, _numbers(values)
+
+
+def diagnostic_statuses(
+    state: HealthState | None,
+    inputs: InputHealth,
+    thresholds: DiagnosticThresholds,
+    rated_load_n: float,
+    hardware_id: str,
+    now_s: float,
+    events: FilterEvents | None = None,
+) -> list[DiagnosticStatusData]:
+    """The estimator statuses, one per concern, in the order of ``STATUS_NAMES``.
+
+    ``state``: the latest estimate (None before the first). ``inputs``, ``events``: see their
+    classes. ``now_s``: the caller's clock, the same as ``inputs.last_sample_s``. Every status
+    is STALE when the last input is older than ``thresholds.stale_timeout_s`` or never came.
+    """
+    events = events if events is not None else FilterEvents()
+    fields = health_estimate_fields(state) if state is not None else None
+    parts: list[tuple[str, _Part]]
+    if fields is None:
+        parts = [(name, (Level.OK, "no estimate yet", [])) for name in STATUS_NAMES[:4]]
+    else:
+        parts = [
+            (AXIAL_LOAD, _axial_load(fields, thresholds, rated_load_n)),
+            (JAMMED_ROLLERS, _jammed(fields, thresholds)),
+            (PRECISION_LOSS, _precision(fields, thresholds)),
+            (FATIGUE, _fatigue(fields, thresholds)),
+        ]
+    parts.append((INPUT_HEALTH, _inputs(inputs, thresholds, now_s)))
+    parts.append((FILTER_CONSISTENCY, _consistency(fields, events, now_s)))
+
+    stale = None
+    if inputs.last_sample_s is None:
+        stale = "stale: no input yet"
+    elif now_s - inputs.last_sample_s > thresholds.stale_timeout_s:
+        stale = f"stale: no input for {now_s - inputs.last_sample_s:.1f} s"
+    statuses = []
+    for name, (level, message, values) in parts:
+        if stale is not None:
+            level, message = Level.STALE, f"{stale}; last: {message}"
+        statuses.append(DiagnosticStatusData(name, level, message, hardware_id, values))
+    return statuses
+
+
+def persistence_status(
+    health: PersistenceHealth, hardware_id: str, now_s: float
+) -> DiagnosticStatusData:
+    """The state file's status: ERROR when saving fails, WARN while an unusable file was kept
+    aside at restore (until the node is cleaned up), else OK."""
+    age = now_s - health.last_save_s if health.last_save_s is not None else -1.0
+    if health.save_error is not None:
+        level, message = Level.ERROR, f"cannot save the state: {health.save_error}"
+    elif health.kept_corrupt is not None:
+        level = Level.WARN
+        message = f"{health.problem}; kept as {health.kept_corrupt}, started fresh"
+    elif health.last_save_s is not None:
+        level, message = Level.OK, f"saved {age:.0f} s ago"
+    else:
+        level = Level.OK
+        message = "resumed from the state file" if health.restored else "not saved yet"
+    numbers = {"saves": health.saves, "last_save_age_s": age, "restored": int(health.restored)}
+    values = [*_numbers(numbers), ("state_file", health.state_file)]
+    if health.kept_corrupt is not None:
+        values.append(("kept_corrupt", health.kept_corrupt))
+    return DiagnosticStatusData(PERSISTENCE, level, message, hardware_id, values)

@@ -1,0 +1,134 @@
+"""Running statistics behind the diagnostics: input rate and rejections, filter events.
+
+ROS-free (the node feeds them on its clock; an offline replay could feed them on bag time).
+:class:`InputTracker` gives :class:`~prsm_health.outputs.InputHealth`,
+:class:`EventTracker` gives :class:`~prsm_health.outputs.FilterEvents`.
+"""
+
+from __future__ import annotations
+
+from collections import Counter, deque
+from collections.abc import Iterable, Mapping
+
+from prsm_health.estimation.estimate import EstimateEvent, HealthState
+from prsm_health.estimation.inputs import InputCounters, RejectReason
+from prsm_health.outputs import FilterEvents, InputHealth
+
+#: Window of the input rate and of the recent rejected fraction [s].
+WINDOW_S = 1.0
+
+
+def rejected_by_reason(counters: InputCounters, extra: Mapping[str, int]) -> dict[str, int]:
+    """The estimator's rejections by reason (names in lower case), then the caller's own."""
+    rejected = {reason.name.lower(): counters.rejected[reason] for reason in RejectReason}
+    rejected.update(extra)
+    return rejected
+
+
+class InputTracker:
+    """Messages received and samples judged, over a sliding window of :data:`WINDOW_S`.
+
+    Times are the caller's clock in seconds; if it jumps back (a looped bag's sim time), the
+    window starts again.
+    """
+
+    def __init__(self) -> None:
+        self._received_total = 0
+        self._last_sample_s: float | None = None
+        self._received: deque[tuple[float, int]] = deque()
+        self._judged: deque[tuple[float, int, int]] = deque()  # time, accepted, rejected
+        self._accepted = 0
+        self._rejected: dict[str, int] = {}
+
+    def update(
+        self, now_s: float, received: int, accepted: int, rejected: Mapping[str, int]
+    ) -> None:
+        """Record ``received`` new messages and the estimator's totals after processing them."""
+        if self._received and now_s < self._received[-1][0]:
+            self._received.clear()
+            self._judged.clear()
+        if received:
+            self._received_total += received
+            self._last_sample_s = now_s
+            self._received.append((now_s, received))
+        new_accepted = accepted - self._accepted
+        new_rejected = sum(rejected.values()) - sum(self._rejected.values())
+        if new_accepted or new_rejected:
+            self._judged.append((now_s, new_accepted, new_rejected))
+        self._accepted, self._rejected = accepted, dict(rejected)
+        self._trim(now_s)
+
+    def _trim(self, now_s: float) -> None:
+        while self._received and self._received[0][0] <= now_s - WINDOW_S:
+            self._received.popleft()
+        while self._judged and self._judged[0][0] <= now_s - WINDOW_S:
+            self._judged.popleft()
+
+    def health(self, now_s: float) -> InputHealth:
+        """The input health at ``now_s``."""
+        self._trim(now_s)
+        accepted = sum(entry[1] for entry in self._judged)
+        rejected = sum(entry[2] for entry in self._judged)
+        judged = accepted + rejected
+        return InputHealth(
+            rate_hz=sum(count for _, count in self._received) / WINDOW_S,
+            last_sample_s=self._last_sample_s,
+            received=self._received_total,
+            accepted=self._accepted,
+            rejected=dict(self._rejected),
+            recent_rejected_fraction=rejected / judged if judged > 0 else 0.0,
+        )
+
+
+class EventTracker:
+    """Counts time resets, gaps, divergence recoveries, non-finite outputs and errors."""
+
+    def __init__(self) -> None:
+        self._divergences = 0
+        self._non_finite: Counter[str] = Counter()
+        self._errors = 0
+        self._time_resets = 0
+        self._gaps = 0
+        self._warning: tuple[float, str] | None = None
+        self._error: tuple[float, str] | None = None
+
+    def observe(self, now_s: float, states: Iterable[HealthState], counters: InputCounters) -> None:
+        """Take note of new estimates and of the estimator's input counters."""
+        for state in states:
+            if state.event == EstimateEvent.DIVERGENCE_RECOVERED:
+                self._divergences += 1
+                self._warning = (now_s, "filter diverged (NIS) and was re-initialised")
+        if counters.time_resets > self._time_resets:
+            self._warning = (now_s, "input time jumped back: load re-initialised")
+        self._time_resets, self._gaps = counters.time_resets, counters.gaps
+
+    def non_finite(self, now_s: float, replaced: Counter[str]) -> None:
+        """Output values replaced because they were not finite (field name -> count)."""
+        if replaced:
+            self._non_finite.update(replaced)
+            names = ", ".join(sorted(replaced))
+            self._error = (now_s, f"non-finite estimate replaced by safe values ({names})")
+
+    def error(self, now_s: float, text: str) -> None:
+        """An exception caught while processing inputs or publishing outputs."""
+        self._errors += 1
+        self._error = (now_s, f"processing error: {text}")
+
+    @property
+    def processing_errors(self) -> int:
+        """Exceptions caught so far."""
+        return self._errors
+
+    def events(self) -> FilterEvents:
+        """The counts and the last warning and error."""
+        return FilterEvents(
+            time_resets=self._time_resets,
+            gaps=self._gaps,
+            divergence_recoveries=self._divergences,
+            non_finite_outputs=sum(self._non_finite.values()),
+            processing_errors=self._errors,
+            last_warning_s=self._warning[0] if self._warning else None,
+            last_warning=self._warning[1] if self._warning else "",
+            last_error_s=self._error[0] if self._error else None,
+            last_error=self._error[1] if self._error else "",
+        )

@@ -1,0 +1,217 @@
+"""HealthEstimate fields and diagnostics as plain data (prsm_health.outputs)."""
+
+from __future__ import annotations
+
+import dataclasses
+import math
+from collections import Counter
+
+import pytest
+
+from prsm_health.estimation.estimate import EstimateEvent, HealthState
+from prsm_health.estimation.params import DiagnosticThresholds
+from prsm_health.outputs import (
+    AXIAL_LOAD,
+    FATIGUE,
+    FILTER_CONSISTENCY,
+    INPUT_HEALTH,
+    JAMMED_ROLLERS,
+    PERSISTENCE,
+    PRECISION_LOSS,
+    STATUS_NAMES,
+    FilterEvents,
+    InputHealth,
+    Level,
+    PersistenceHealth,
+    diagnostic_statuses,
+    health_estimate_fields,
+    persistence_status,
+)
+
+RATED_N = 55_000.0
+NOW = 100.0
+
+
+#: An estimate: 20 kN resisting, almost surely no jam, 2 um lost.
+BASE_STATE = {
+    "stamp_s": 99.9,
+    "axial_load_n": -20_000.0,
+    "axial_load_std_n": 150.0,
+    "jam_probabilities": (0.99, 0.01, 0.0),
+    "precision_loss_m": 2e-6,
+    "precision_loss_std_m": 5e-7,
+    "precision_loss_rate_m_per_s": 1e-9,
+    "friction_torque_nm": 0.8,
+    "efficiency": 0.9,
+    "fatigue_damage": 0.01,
+    "fatigue_damage_std": 0.002,
+    "screw_speed_rad_s": 31.4,
+    "samples_accepted": 5000,
+    "samples_rejected": 3,
+    "nis": 1.1,
+    "event": EstimateEvent.NONE,
+}
+
+
+def state(**changes: object) -> HealthState:
+    return HealthState(**{**BASE_STATE, **changes})  # type: ignore[arg-type]
+
+
+def inputs(**changes: object) -> InputHealth:
+    base = InputHealth(
+        rate_hz=1000.0,
+        last_sample_s=NOW - 0.01,
+        received=5003,
+        accepted=5000,
+        rejected={"non_finite": 3, "spike": 0},
+    )
+    return dataclasses.replace(base, **changes)  # type: ignore[arg-type]
+
+
+def statuses(
+    s: HealthState | None = None,
+    i: InputHealth | None = None,
+    th: DiagnosticThresholds | None = None,
+    events: FilterEvents | None = None,
+) -> dict[str, tuple[Level, str, dict[str, str]]]:
+    result = diagnostic_statuses(
+        s if s is not None else state(),
+        i if i is not None else inputs(),
+        th if th is not None else DiagnosticThresholds(),
+        RATED_N,
+        "left",
+        NOW,
+        events,
+    )
+    assert [r.name for r in result] == list(STATUS_NAMES)
+    assert all(r.hardware_id == "left" for r in result)
+    return {r.name: (r.level, r.message, dict(r.values)) for r in result}
+
+
+def test_fields_in_message_units() -> None:
+    fields = health_estimate_fields(state())
+    assert fields["axial_load_n"] == 20_000.0  # magnitude
+    assert fields["precision_loss_um"] == pytest.approx(2.0)
+    assert fields["precision_loss_std_um"] == pytest.approx(0.5)
+    assert fields["precision_loss_rate_um_per_h"] == pytest.approx(1e-9 * 1e6 * 3600)
+    assert fields["jammed_rollers_probability"] == [0.99, 0.01, 0.0]
+    assert fields["jammed_rollers_most_likely"] == 0
+    assert fields["normalized_innovation_squared"] == 1.1
+    assert fields["event"] == 0
+    assert (fields["samples_accepted"], fields["samples_rejected"]) == (5000, 3)
+
+
+def test_non_finite_values_are_replaced_and_counted() -> None:
+    replaced: Counter[str] = Counter()
+    bad = state(
+        axial_load_n=math.nan,
+        efficiency=math.inf,
+        jam_probabilities=(math.nan, 0.5, 0.5),
+    )
+    fields = health_estimate_fields(bad, replaced=replaced)
+    assert fields["axial_load_n"] == 0.0
+    assert fields["efficiency"] == 0.0
+    assert fields["jammed_rollers_probability"] == pytest.approx([1 / 3] * 3)
+    assert replaced == {"axial_load_n": 1, "efficiency": 1, "jammed_rollers_probability": 1}
+    floats = [v for v in fields.values() if isinstance(v, float)]
+    assert all(math.isfinite(v) for v in floats + fields["jammed_rollers_probability"])
+
+
+def test_load_levels_follow_the_rated_fractions() -> None:
+    th = DiagnosticThresholds()
+    for load, level in ((0.5, Level.OK), (0.95, Level.WARN), (1.2, Level.ERROR)):
+        got, message, values = statuses(state(axial_load_n=load * RATED_N), th=th)[AXIAL_LOAD]
+        assert got == level, (load, message)
+        assert float(values["axial_load_n"]) == pytest.approx(load * RATED_N)
+        assert float(values["load_fraction_of_rated"]) == pytest.approx(load)
+
+
+def test_jam_levels_and_message_names_the_count() -> None:
+    level, message, values = statuses(state(jam_probabilities=(0.02, 0.98, 0.0)))[JAMMED_ROLLERS]
+    assert level == Level.ERROR
+    assert message == "1 jammed roller (p = 0.98)"
+    assert values["jammed_rollers_most_likely"] == "1"
+    assert float(values["jam_probability_1"]) == pytest.approx(0.98)
+    assert float(values["jam_probability_any"]) == pytest.approx(0.98)
+
+    level, message, _ = statuses(state(jam_probabilities=(0.1, 0.2, 0.7)))[JAMMED_ROLLERS]
+    assert (level, message) == (Level.ERROR, "2 jammed rollers (p = 0.70)")
+
+    level, message, _ = statuses(state(jam_probabilities=(0.7, 0.3, 0.0)))[JAMMED_ROLLERS]
+    assert level == Level.WARN
+    assert "0.30" in message
+
+    level, _, _ = statuses(state(jam_probabilities=(0.9, 0.1, 0.0)))[JAMMED_ROLLERS]
+    assert level == Level.OK
+
+
+def test_precision_loss_and_fatigue_levels() -> None:
+    th = DiagnosticThresholds(precision_loss_budget_um=10.0)
+    level, _, values = statuses(state(precision_loss_m=8e-6), th=th)[PRECISION_LOSS]
+    assert level == Level.WARN
+    assert float(values["precision_loss_um"]) == pytest.approx(8.0)
+    assert statuses(state(precision_loss_m=11e-6), th=th)[PRECISION_LOSS][0] == Level.ERROR
+    assert statuses(state(fatigue_damage=0.6))[FATIGUE][0] == Level.WARN
+    assert statuses(state(fatigue_damage=0.95))[FATIGUE][0] == Level.ERROR
+
+
+def test_input_health_rate_and_rejections() -> None:
+    level, _, values = statuses(i=inputs())[INPUT_HEALTH]
+    assert level == Level.OK
+    assert values["rejected_non_finite"] == "3"
+    assert values["received"] == "5003"
+    level, message, _ = statuses(i=inputs(rate_hz=20.0))[INPUT_HEALTH]
+    assert level == Level.WARN
+    assert "20 Hz" in message
+    level, message, _ = statuses(i=inputs(recent_rejected_fraction=0.2))[INPUT_HEALTH]
+    assert level == Level.WARN
+    assert "non_finite" in message
+
+
+def test_filter_consistency_reports_recent_problems() -> None:
+    level, _, values = statuses()[FILTER_CONSISTENCY]
+    assert level == Level.OK
+    assert float(values["normalized_innovation_squared"]) == pytest.approx(1.1)
+    recent = FilterEvents(divergence_recoveries=1, last_warning_s=NOW - 2.0, last_warning="x")
+    assert statuses(events=recent)[FILTER_CONSISTENCY][:2] == (Level.WARN, "x")
+    old = dataclasses.replace(recent, last_warning_s=NOW - 60.0)
+    assert statuses(events=old)[FILTER_CONSISTENCY][0] == Level.OK
+    error = FilterEvents(non_finite_outputs=2, last_error_s=NOW, last_error="non-finite")
+    assert statuses(events=error)[FILTER_CONSISTENCY][0] == Level.ERROR
+
+
+def test_every_status_is_stale_without_recent_input() -> None:
+    th = DiagnosticThresholds(stale_timeout_s=0.5)
+    result = statuses(i=inputs(last_sample_s=NOW - 2.0), th=th)
+    assert {level for level, _, _ in result.values()} == {Level.STALE}
+    assert all(message.startswith("stale: no input for 2.0 s") for _, message, _ in result.values())
+    never = statuses(i=inputs(last_sample_s=None), th=th)
+    assert {level for level, _, _ in never.values()} == {Level.STALE}
+    assert statuses(i=inputs(last_sample_s=NOW - 0.4), th=th)[AXIAL_LOAD][0] == Level.OK
+
+
+def test_no_estimate_yet() -> None:
+    result = diagnostic_statuses(None, inputs(), DiagnosticThresholds(), RATED_N, "left", NOW, None)
+    assert [s.level for s in result[:4]] == [Level.OK] * 4
+    assert all(s.message == "no estimate yet" for s in result[:4])
+
+
+def test_values_are_bare_numbers() -> None:
+    for name, (_, _, values) in statuses().items():
+        for key, value in values.items():
+            assert float(value) == float(value), (name, key)  # parses, not NaN
+            assert math.isfinite(float(value)), (name, key)
+
+
+def test_persistence_status() -> None:
+    fresh = persistence_status(PersistenceHealth(state_file="/s.json"), "left", NOW)
+    assert (fresh.name, fresh.level) == (PERSISTENCE, Level.OK)
+    kept = PersistenceHealth(
+        state_file="/s.json", kept_corrupt="/s.json.corrupt-x", problem="unusable state file"
+    )
+    status = persistence_status(kept, "left", NOW)
+    assert status.level == Level.WARN
+    assert "/s.json.corrupt-x" in status.message
+    assert ("kept_corrupt", "/s.json.corrupt-x") in status.values
+    failing = PersistenceHealth(state_file="/s.json", save_error="disk full")
+    assert persistence_status(failing, "left", NOW).level == Level.ERROR

@@ -1,0 +1,69 @@
+"""Running input and filter statistics behind the diagnostics (prsm_health.tracking)."""
+
+from __future__ import annotations
+
+import dataclasses
+from collections import Counter
+
+import pytest
+
+from prsm_health.estimation.estimate import EstimateEvent
+from prsm_health.estimation.inputs import InputCounters, RejectReason
+from prsm_health.tracking import EventTracker, InputTracker, rejected_by_reason
+from test.test_outputs import state
+
+
+def test_rate_counts_the_last_second_only() -> None:
+    tracker = InputTracker()
+    for i in range(200):  # 10 messages every 10 ms for 2 s
+        tracker.update(i * 0.01, 10, accepted=10 * (i + 1), rejected={"spike": 0})
+    health = tracker.health(1.99)
+    assert health.rate_hz == pytest.approx(1000.0)
+    assert health.received == 2000
+    assert health.last_sample_s == pytest.approx(1.99)
+    assert tracker.health(5.0).rate_hz == 0.0
+    assert tracker.health(5.0).last_sample_s == pytest.approx(1.99)
+
+
+def test_recent_rejected_fraction() -> None:
+    tracker = InputTracker()
+    tracker.update(0.0, 100, accepted=100, rejected={"spike": 0})
+    tracker.update(0.5, 100, accepted=180, rejected={"spike": 20})
+    health = tracker.health(0.9)
+    assert health.recent_rejected_fraction == pytest.approx(20 / 200)
+    assert health.rejected == {"spike": 20}
+    assert tracker.health(1.4).recent_rejected_fraction == pytest.approx(20 / 100)
+    assert tracker.health(2.0).recent_rejected_fraction == 0.0
+
+
+def test_clock_jumping_back_restarts_the_window() -> None:
+    tracker = InputTracker()
+    tracker.update(10.0, 100, accepted=100, rejected={})
+    tracker.update(1.0, 5, accepted=105, rejected={})
+    assert tracker.health(1.0).rate_hz == pytest.approx(5.0)
+
+
+def test_rejections_by_reason_include_the_callers_own() -> None:
+    counters = InputCounters()
+    counters.rejected[RejectReason.TIME_BACKWARDS] = 4
+    rejected = rejected_by_reason(counters, Counter(joint_missing=2))
+    assert rejected["time_backwards"] == 4
+    assert rejected["joint_missing"] == 2
+    assert set(rejected) >= {r.name.lower() for r in RejectReason}
+
+
+def test_event_tracker() -> None:
+    tracker = EventTracker()
+    counters = InputCounters(time_resets=0, gaps=1)
+    recovered = dataclasses.replace(state(), event=EstimateEvent.DIVERGENCE_RECOVERED)
+    tracker.observe(5.0, [state(), recovered], counters)
+    events = tracker.events()
+    assert (events.divergence_recoveries, events.gaps, events.last_warning_s) == (1, 1, 5.0)
+    tracker.observe(6.0, [], InputCounters(time_resets=1))
+    assert tracker.events().time_resets == 1
+    assert tracker.events().last_warning_s == 6.0
+    tracker.non_finite(7.0, Counter(efficiency=2))
+    tracker.error(8.0, "boom")
+    events = tracker.events()
+    assert (events.non_finite_outputs, events.processing_errors) == (2, 1)
+    assert (events.last_error_s, events.last_error) == (8.0, "processing error: boom")
