@@ -1,0 +1,82 @@
+"""The node's parameter table and its validation (no ROS needed)."""
+
+from __future__ import annotations
+
+from pathlib import Path
+from typing import Any
+
+import pytest
+
+from prsm_health.ros.parameters import (
+    PARAMETERS,
+    SPECS,
+    ConfigError,
+    default_params_file,
+    node_config,
+)
+
+REPO = Path(__file__).resolve().parents[2]
+
+
+def values(**changes: Any) -> dict[str, Any]:
+    return {**{spec.name: spec.default for spec in PARAMETERS}, **changes}
+
+
+def test_defaults_make_a_valid_config() -> None:
+    config = node_config(values(state_file="/var/lib/x.json"))
+    assert config.params_file == default_params_file() == REPO / "config" / "default.yaml"
+    assert config.estimator.actuator.preset.name == "dong2022-downhole"
+    assert config.input_topic == "motor_state"
+    assert config.health_rate_hz == 0.0
+    assert config.state_file == Path("/var/lib/x.json")
+
+
+def test_input_topic_follows_the_input_type() -> None:
+    assert node_config(values(input_type="joint_state")).input_topic == "joint_states"
+    assert node_config(values(input_topic="/a/b")).input_topic == "/a/b"
+
+
+def test_every_bad_parameter_is_named() -> None:
+    with pytest.raises(ConfigError) as info:
+        node_config(
+            values(health_rate_hz=-1.0, input_type="can", hardware_id="a/b", save_period_s=True)
+        )
+    assert set(info.value.problems) == {
+        "health_rate_hz",
+        "input_type",
+        "hardware_id",
+        "save_period_s",
+    }
+    message = str(info.value)
+    assert "parameter health_rate_hz: must be in [0, 1000], got -1.0" in message
+    assert "parameter input_type: must be one of motor_state, joint_state" in message
+
+
+def test_errors_known_from_ros_are_reported() -> None:
+    with pytest.raises(ConfigError, match="parameter diagnostics_rate_hz: refused"):
+        node_config(values(), {"diagnostics_rate_hz": "refused by ROS"})
+
+
+def test_preset_override_and_its_errors() -> None:
+    config = node_config(values(preset="li2020-jamming"))
+    assert config.estimator.actuator.preset.name == "li2020-jamming"
+    with pytest.raises(ConfigError) as info:
+        node_config(values(preset="no-such-preset"))
+    assert list(info.value.problems) == ["preset"]
+
+
+def test_params_file_errors_name_the_file(tmp_path: Path) -> None:
+    missing = tmp_path / "missing.yaml"
+    with pytest.raises(ConfigError, match=f"parameter params_file: {missing}"):
+        node_config(values(params_file=str(missing)))
+    bad = tmp_path / "bad.yaml"
+    bad.write_text("actuator: {preset: dong2022-downhole}\nfilter: {gate_nis: -1}\n")
+    with pytest.raises(ConfigError, match=r"params_file: .*filter\.gate_nis"):
+        node_config(values(params_file=str(bad)))
+
+
+def test_ranges_accept_integers_for_doubles_but_not_bools() -> None:
+    assert SPECS["health_rate_hz"].problem(5) is None
+    assert SPECS["health_rate_hz"].problem(True) is not None
+    assert SPECS["input_queue_depth"].problem(0) is not None
+    assert SPECS["autostart"].read_only

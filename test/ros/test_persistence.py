@@ -1,0 +1,131 @@
+"""The state file: atomic saves; bad files kept aside, never replaced silently."""
+
+from __future__ import annotations
+
+import errno
+import json
+import os
+from pathlib import Path
+
+import pytest
+
+from prsm_health.estimation.estimator import HealthEstimator
+from prsm_health.estimation.params import EstimatorParams, params_from_mapping
+from prsm_health.ros.persistence import FORMAT, StateStore, default_state_file
+from test.ros.data import synthetic_run
+
+
+@pytest.fixture(scope="module")
+def params() -> EstimatorParams:
+    return params_from_mapping(
+        {"actuator": {"preset": "dong2022-downhole", "wear_acceleration": 1e6}}
+    )
+
+
+@pytest.fixture(scope="module")
+def worn(params: EstimatorParams) -> HealthEstimator:
+    estimator = HealthEstimator(params)
+    estimator.process(synthetic_run(2.0))
+    assert estimator.snapshot()["degradation"]["precision_loss_m"] > 0.0
+    return estimator
+
+
+def test_save_then_restore_round_trips(
+    tmp_path: Path, params: EstimatorParams, worn: HealthEstimator
+) -> None:
+    store = StateStore(tmp_path / "deep" / "left.json", "left")
+    store.save(worn)
+    document = json.loads(store.path.read_text())
+    assert document["format"] == FORMAT
+    assert document["hardware_id"] == "left"
+    assert list(tmp_path.joinpath("deep").iterdir()) == [store.path]  # no temporary left
+    fresh = HealthEstimator(params)
+    outcome = store.restore(fresh)
+    assert outcome.restored and outcome.kept_corrupt is None
+    assert fresh.snapshot() == worn.snapshot()
+
+
+def test_missing_file_is_a_fresh_start(tmp_path: Path, params: EstimatorParams) -> None:
+    outcome = StateStore(tmp_path / "none.json", "left").restore(HealthEstimator(params))
+    assert not outcome.restored and outcome.kept_corrupt is None
+
+
+@pytest.mark.parametrize(
+    ("content", "reason"),
+    [
+        ("{not json", "unusable state file"),
+        ('{"format": "prsm_health.state/1", "hardware_id": "left", "estimator": []}', "no est"),
+        ('{"format": "other"}', "not a prsm_health.state/1"),
+    ],
+)
+def test_corrupt_file_is_kept_aside(
+    tmp_path: Path, params: EstimatorParams, content: str, reason: str
+) -> None:
+    path = tmp_path / "left.json"
+    path.write_text(content)
+    estimator = HealthEstimator(params)
+    before = estimator.snapshot()
+    outcome = StateStore(path, "left").restore(estimator)
+    assert not outcome.restored
+    assert outcome.kept_corrupt is not None
+    assert outcome.kept_corrupt.name.startswith("left.json.corrupt-")
+    assert outcome.kept_corrupt.read_text() == content
+    assert not path.exists()
+    assert reason in outcome.problem
+    assert estimator.snapshot() == before
+
+
+def test_malformed_estimator_state_is_kept_aside(
+    tmp_path: Path, params: EstimatorParams, worn: HealthEstimator
+) -> None:
+    store = StateStore(tmp_path / "left.json", "left")
+    store.save(worn)
+    document = json.loads(store.path.read_text())
+    document["estimator"]["hypotheses"] = [1, 2]  # a list where a mapping belongs
+    store.path.write_text(json.dumps(document))
+    outcome = store.restore(HealthEstimator(params))
+    assert outcome.kept_corrupt is not None
+    assert "malformed" in outcome.problem or "attribute" in outcome.problem
+
+
+def test_state_of_another_actuator_or_hardware_is_refused(
+    tmp_path: Path, params: EstimatorParams, worn: HealthEstimator
+) -> None:
+    other = HealthEstimator(params_from_mapping({"actuator": {"preset": "meng2021-fractal"}}))
+    StateStore(tmp_path / "left.json", "left").save(other)
+    outcome = StateStore(tmp_path / "left.json", "left").restore(HealthEstimator(params))
+    assert outcome.kept_corrupt is not None
+    assert "another actuator" in outcome.problem
+
+    StateStore(tmp_path / "right.json", "right").save(worn)
+    os.replace(tmp_path / "right.json", tmp_path / "left.json")
+    outcome = StateStore(tmp_path / "left.json", "left").restore(HealthEstimator(params))
+    assert outcome.kept_corrupt is not None
+    assert "hardware_id 'right'" in outcome.problem
+    assert len(list(tmp_path.glob("left.json.corrupt-*"))) == 2  # both kept, distinct names
+
+
+def test_failed_save_leaves_the_old_file(
+    tmp_path: Path, params: EstimatorParams, worn: HealthEstimator, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    """A disk error while syncing the new state (injected: the tests run as root on a healthy
+    disk, where no real write fails) leaves the previous state and no temporary file."""
+    store = StateStore(tmp_path / "left.json", "left")
+    store.save(HealthEstimator(params))
+    old = store.path.read_text()
+
+    def failing_fsync(fd: int) -> None:
+        raise OSError(errno.EIO, "injected I/O error")
+
+    monkeypatch.setattr(os, "fsync", failing_fsync)
+    with pytest.raises(OSError, match="injected"):
+        store.save(worn)
+    assert store.path.read_text() == old
+    assert list(tmp_path.iterdir()) == [store.path]
+
+
+def test_default_state_file(monkeypatch: pytest.MonkeyPatch) -> None:
+    monkeypatch.setenv("XDG_STATE_HOME", "/var/state")
+    assert default_state_file("left") == Path("/var/state/prsm_health/left.json")
+    monkeypatch.delenv("XDG_STATE_HOME")
+    assert default_state_file("left") == Path.home() / ".local/state/prsm_health/left.json"
