@@ -26,5 +26,10 @@ setup(
     maintainer_email="prsm-health@example.com",
     description="Health monitoring of planetary roller screw mechanisms (PRSM) for ROS 2.",
     license="Apache-2.0",
-    entry_points={"console_scripts": [f"prsm-health = {PACKAGE}.cli:main"]},
+    entry_points={
+        "console_scripts": [
+            f"prsm-health = {PACKAGE}.cli:main",
+            f"prsm-health-node = {PACKAGE}.ros.node:main",
+        ]
+    },
 )

@@ -1,0 +1,482 @@
+"""``prsm_health_node``: the health estimator as a ROS 2 lifecycle node.
+
+Inputs: ``prsm_health_msgs/MotorState`` or ``sensor_msgs/JointState`` (the named joint; effort
+is the motor current or torque) on ``input_topic``; their header stamps drive the filter.
+Received samples are handed to :class:`HealthEstimator` every ``batch_period_s``.
+Outputs: ``~/health`` (``HealthEstimate``, every estimate or at ``health_rate_hz``) and
+``/diagnostics`` (``DiagnosticArray``, reliable, at ``diagnostics_rate_hz``; the statuses of
+:mod:`prsm_health.outputs`). Timing of the diagnostics and of staleness uses the node's clock,
+so ``use_sim_time`` works. The estimator state is saved (:mod:`prsm_health.ros.persistence`)
+every ``save_period_s`` of steady time, on deactivate and on shutdown, and restored on
+configure.
+
+Lifecycle: configure (validate parameters, build the estimator, restore the state, create the
+publishers), activate (subscribe, start the timers, publish), deactivate (process what was
+received, save, stop: an inactive node publishes nothing), cleanup, shutdown (save).
+``autostart`` (default true) configures and activates at start. The node never crashes on
+input: every callback catches its exceptions, counts them (filter-consistency status) and
+logs at most once per second; non-finite outputs are replaced and counted.
+
+Run: ``prsm-health-node --ros-args -p name:=value`` or ``python -m prsm_health.ros.node``.
+SIGINT and SIGTERM shut it down cleanly with the state saved. docs/ros.md has the details.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import sys
+from collections import Counter
+from collections.abc import Sequence
+from typing import Any
+
+import numpy as np
+from diagnostic_msgs.msg import DiagnosticArray
+from prsm_health_msgs.msg import HealthEstimate, MotorState
+from rcl_interfaces.msg import (
+    FloatingPointRange,
+    IntegerRange,
+    ParameterDescriptor,
+    SetParametersResult,
+)
+from rclpy.clock import Clock
+from rclpy.clock_type import ClockType
+from rclpy.exceptions import InvalidParameterTypeException, InvalidParameterValueException
+from rclpy.executors import SingleThreadedExecutor
+from rclpy.lifecycle import LifecycleNode, LifecycleState, TransitionCallbackReturn
+from rclpy.parameter import Parameter
+from rclpy.qos import QoSHistoryPolicy, QoSProfile, QoSReliabilityPolicy
+from rclpy.utilities import ok, remove_ros_args
+from sensor_msgs.msg import JointState
+
+from prsm_health.estimation.estimate import HealthState
+from prsm_health.estimation.estimator import HealthEstimator
+from prsm_health.outputs import (
+    PersistenceHealth,
+    diagnostic_statuses,
+    health_estimate_fields,
+    persistence_status,
+)
+from prsm_health.ros.messages import (
+    diagnostic_array,
+    health_estimate,
+    joint_sample,
+    stamp_seconds,
+)
+from prsm_health.ros.parameters import (
+    NODE_NAME,
+    PARAMETERS,
+    SPECS,
+    ConfigError,
+    NodeConfig,
+    ParameterSpec,
+    node_config,
+)
+from prsm_health.ros.persistence import StateStore
+from prsm_health.ros.runtime import ros_session
+from prsm_health.signals import MotorSamples
+from prsm_health.tracking import EventTracker, InputTracker, rejected_by_reason
+
+NS_PER_S = 1e9
+HEALTH_QOS_DEPTH = 100
+DIAGNOSTICS_QOS_DEPTH = 10
+#: How often the main loop returns to Python to see a SIGINT/SIGTERM [s].
+SPIN_TIMEOUT_S = 0.1
+
+
+def _descriptor(spec: ParameterSpec) -> ParameterDescriptor:
+    constraints = "one of: " + ", ".join(spec.choices) if spec.choices else ""
+    descriptor = ParameterDescriptor(
+        description=spec.description,
+        additional_constraints=constraints
+        or ("read-only" if spec.read_only else "applied at configure"),
+        read_only=spec.read_only,
+    )
+    if spec.bounds is not None:
+        low, high = spec.bounds
+        if isinstance(spec.default, float):
+            descriptor.floating_point_range = [FloatingPointRange(from_value=low, to_value=high)]
+        else:
+            descriptor.integer_range = [IntegerRange(from_value=int(low), to_value=int(high))]
+    return descriptor
+
+
+class _Pending:
+    """Samples received since the last batch (plain lists: cheap to append at 1 kHz)."""
+
+    def __init__(self) -> None:
+        self.columns: tuple[list[float], ...] = ([], [], [], [])
+        self.received = 0
+
+    def add(
+        self, stamp_s: float, current_a: float, speed_rad_s: float, position_rad: float
+    ) -> None:
+        stamps, currents, speeds, positions = self.columns
+        stamps.append(stamp_s)
+        currents.append(current_a)
+        speeds.append(speed_rad_s)
+        positions.append(position_rad)
+        self.received += 1
+
+    def take(self) -> tuple[MotorSamples, int]:
+        """The pending samples (may be empty) and the messages received, then reset."""
+        samples = MotorSamples(*(np.asarray(column, dtype=np.float64) for column in self.columns))
+        received = self.received
+        self.columns, self.received = ([], [], [], []), 0
+        return samples, received
+
+
+class HealthNode(LifecycleNode):
+    """The lifecycle node (module docstring)."""
+
+    def __init__(self, **kwargs: Any) -> None:
+        super().__init__(NODE_NAME, **kwargs)
+        self._declare_errors = self._declare_parameters()
+        self.add_on_set_parameters_callback(self._on_set_parameters)
+        self._steady = Clock(clock_type=ClockType.STEADY_TIME)
+        self._config: NodeConfig | None = None
+        self._estimator: HealthEstimator | None = None
+        self._store: StateStore | None = None
+        self._persistence = PersistenceHealth(state_file="")
+        self._health_pub: Any = None
+        self._diagnostics_pub: Any = None
+        self._subscription: Any = None
+        self._timers: list[Any] = []
+        self._reset_run_state()
+
+    # --- parameters ---------------------------------------------------------------------
+    def _declare_parameters(self) -> dict[str, str]:
+        """Declare every parameter; a value ROS refuses (type, range) is kept as an error for
+        configure to report, and the default is declared instead: the node does not crash."""
+        errors = {}
+        for spec in PARAMETERS:
+            try:
+                self.declare_parameter(spec.name, spec.default, _descriptor(spec))
+            except (InvalidParameterTypeException, InvalidParameterValueException) as exc:
+                errors[spec.name] = f"refused by ROS: {str(exc).removesuffix(f': {spec.name}')}"
+                self.declare_parameter(
+                    spec.name, spec.default, _descriptor(spec), ignore_override=True
+                )
+        return errors
+
+    def _on_set_parameters(self, parameters: list[Parameter]) -> SetParametersResult:
+        for parameter in parameters:
+            spec = SPECS.get(parameter.name)
+            if spec is None:
+                continue
+            if self._config is not None:
+                return SetParametersResult(
+                    successful=False,
+                    reason=f"parameter {parameter.name} is applied at configure: deactivate"
+                    " and clean up the node first",
+                )
+            if problem := spec.problem(parameter.value):
+                return SetParametersResult(
+                    successful=False, reason=f"parameter {parameter.name}: {problem}"
+                )
+            self._declare_errors.pop(parameter.name, None)
+        return SetParametersResult(successful=True)
+
+    def _parameter_values(self) -> dict[str, Any]:
+        return {spec.name: self.get_parameter(spec.name).value for spec in PARAMETERS}
+
+    # --- lifecycle ----------------------------------------------------------------------
+    def autostart(self) -> None:
+        """Configure and activate if the ``autostart`` parameter says so."""
+        if not self.get_parameter("autostart").value:
+            self.get_logger().info("autostart is false: waiting for the lifecycle transitions")
+            return
+        if self.trigger_configure() == TransitionCallbackReturn.SUCCESS:
+            self.trigger_activate()
+
+    def on_configure(self, state: LifecycleState) -> TransitionCallbackReturn:
+        try:
+            config = node_config(self._parameter_values(), self._declare_errors)
+        except ConfigError as exc:
+            self.get_logger().error(f"configure failed: {exc}")
+            return TransitionCallbackReturn.FAILURE
+        try:
+            self._configure(config)
+        except Exception as exc:
+            self.get_logger().error(f"configure failed: {exc!r}")
+            self._release()
+            return TransitionCallbackReturn.FAILURE
+        self.get_logger().info(
+            f"configured: {config.hardware_id}, preset {config.estimator.actuator.preset.name},"
+            f" input {config.input_type} on {self.resolve_topic_name(config.input_topic)}"
+        )
+        return TransitionCallbackReturn.SUCCESS
+
+    def _configure(self, config: NodeConfig) -> None:
+        self._reset_run_state()
+        estimator = HealthEstimator(config.estimator)
+        store = StateStore(config.state_file, config.hardware_id)
+        outcome = store.restore(estimator)
+        self._persistence = PersistenceHealth(
+            state_file=str(config.state_file),
+            restored=outcome.restored,
+            kept_corrupt=str(outcome.kept_corrupt) if outcome.kept_corrupt else None,
+            problem=outcome.problem,
+        )
+        if outcome.kept_corrupt is not None:
+            estimator = HealthEstimator(config.estimator)  # fresh: restore may have failed late
+            self.get_logger().error(
+                f"{outcome.problem}; kept as {outcome.kept_corrupt}; starting fresh"
+            )
+        elif outcome.restored:
+            loss_um = estimator.snapshot()["degradation"].get("precision_loss_m", 0.0) * 1e6
+            self.get_logger().info(
+                f"resumed from {config.state_file} (precision loss {loss_um:.4g} um)"
+            )
+        else:
+            self.get_logger().info(f"no state file at {config.state_file}: starting fresh")
+        self._config, self._estimator, self._store = config, estimator, store
+        self._health_pub = self.create_lifecycle_publisher(
+            HealthEstimate, "~/health", HEALTH_QOS_DEPTH
+        )
+        reliable = QoSProfile(
+            depth=DIAGNOSTICS_QOS_DEPTH, reliability=QoSReliabilityPolicy.RELIABLE
+        )
+        self._diagnostics_pub = self.create_lifecycle_publisher(
+            DiagnosticArray, "/diagnostics", reliable
+        )
+
+    def on_activate(self, state: LifecycleState) -> TransitionCallbackReturn:
+        config = self._config
+        if config is None:  # the lifecycle activates only configured nodes
+            return TransitionCallbackReturn.FAILURE
+        reliability = (
+            QoSReliabilityPolicy.RELIABLE
+            if config.input_qos == "reliable"
+            else QoSReliabilityPolicy.BEST_EFFORT
+        )
+        qos = QoSProfile(
+            depth=config.input_queue_depth,
+            history=QoSHistoryPolicy.KEEP_LAST,
+            reliability=reliability,
+        )
+        if config.input_type == "motor_state":
+            self._subscription = self.create_subscription(
+                MotorState, config.input_topic, self._on_motor_state, qos
+            )
+        else:
+            self._subscription = self.create_subscription(
+                JointState, config.input_topic, self._on_joint_state, qos
+            )
+        self._timers = [
+            self.create_timer(config.batch_period_s, self._on_batch, clock=self._steady),
+            self.create_timer(1.0 / config.diagnostics_rate_hz, self._on_diagnostics),
+            self.create_timer(config.save_period_s, self._on_save, clock=self._steady),
+        ]
+        if config.health_rate_hz > 0.0:
+            self._timers.append(
+                self.create_timer(1.0 / config.health_rate_hz, self._on_health_timer)
+            )
+        return super().on_activate(state)
+
+    def on_deactivate(self, state: LifecycleState) -> TransitionCallbackReturn:
+        self._stop()
+        return super().on_deactivate(state)
+
+    def on_cleanup(self, state: LifecycleState) -> TransitionCallbackReturn:
+        self._release()
+        return TransitionCallbackReturn.SUCCESS
+
+    def on_shutdown(self, state: LifecycleState) -> TransitionCallbackReturn:
+        self._stop()
+        self._release()
+        return TransitionCallbackReturn.SUCCESS
+
+    def on_error(self, state: LifecycleState) -> TransitionCallbackReturn:
+        self.get_logger().error(f"error in state {state.label}: releasing and going unconfigured")
+        self._stop()
+        self._release()
+        return TransitionCallbackReturn.SUCCESS
+
+    def _stop(self) -> None:
+        """Process what was received, save, unsubscribe and stop the timers."""
+        if self._subscription is not None:
+            self._on_batch()
+            self.destroy_subscription(self._subscription)
+            self._subscription = None
+        for timer in self._timers:
+            self.destroy_timer(timer)
+        self._timers = []
+        self._save()
+
+    def _release(self) -> None:
+        """Drop what configure created."""
+        for publisher in (self._health_pub, self._diagnostics_pub):
+            if publisher is not None:
+                self.destroy_lifecycle_publisher(publisher)
+        self._health_pub = self._diagnostics_pub = None
+        self._config = self._estimator = self._store = None
+
+    def _reset_run_state(self) -> None:
+        self._pending = _Pending()
+        self._node_rejects: Counter[str] = Counter()
+        self._inputs = InputTracker()
+        self._events = EventTracker()
+        self._latest: HealthState | None = None
+        self._latest_published = True
+        self._frame_id = ""
+        self._saved_at_samples = -1
+
+    # --- inputs -------------------------------------------------------------------------
+    def _now_s(self) -> float:
+        return float(self.get_clock().now().nanoseconds) / NS_PER_S
+
+    def _on_motor_state(self, msg: Any) -> None:
+        try:
+            self._pending.add(
+                stamp_seconds(msg.header.stamp), msg.current_a, msg.speed_rad_s, msg.position_rad
+            )
+            self._frame_id = msg.header.frame_id
+        except Exception as exc:
+            self._fault("MotorState input", exc)
+
+    def _on_joint_state(self, msg: Any) -> None:
+        try:
+            config = self._config
+            if config is None:
+                return
+            k_t = (
+                None
+                if config.effort_is == "current"
+                else config.estimator.actuator.drive_train.torque_constant_nm_per_a
+            )
+            sample = joint_sample(msg, config.joint_name, k_t)
+            if sample.problem:
+                self._node_rejects[sample.problem] += 1
+                self._pending.received += 1
+                return
+            self._pending.add(
+                stamp_seconds(msg.header.stamp),
+                sample.current_a,
+                sample.speed_rad_s,
+                sample.position_rad,
+            )
+            self._frame_id = msg.header.frame_id
+        except Exception as exc:
+            self._fault("JointState input", exc)
+
+    def _fault(self, where: str, exc: BaseException) -> None:
+        self._events.error(self._now_s(), f"{where}: {exc!r}")
+        self.get_logger().error(
+            f"{where}: {exc!r} ({self._events.processing_errors} errors so far)",
+            throttle_duration_sec=1.0,
+        )
+
+    # --- processing and outputs ---------------------------------------------------------
+    def _on_batch(self) -> None:
+        try:
+            estimator, config = self._estimator, self._config
+            if estimator is None or config is None:
+                return
+            samples, received = self._pending.take()
+            states = estimator.process(samples) if len(samples) else []
+            now = self._now_s()
+            counters = estimator.counters
+            self._inputs.update(
+                now, received, counters.accepted, rejected_by_reason(counters, self._node_rejects)
+            )
+            self._events.observe(now, states, counters)
+            if states:
+                self._latest = states[-1]
+                self._latest_published = False
+                if config.health_rate_hz == 0.0:
+                    for state in states:
+                        self._publish_health(state)
+        except Exception as exc:
+            self._fault("processing", exc)
+
+    def _publish_health(self, state: HealthState) -> None:
+        replaced: Counter[str] = Counter()
+        fields = health_estimate_fields(state, replaced=replaced)
+        self._events.non_finite(self._now_s(), replaced)
+        self._health_pub.publish(health_estimate(fields, state.stamp_s, self._frame_id))
+        self._latest_published = True
+
+    def _on_health_timer(self) -> None:
+        try:
+            if self._latest is not None and not self._latest_published:
+                self._publish_health(self._latest)
+        except Exception as exc:
+            self._fault("health", exc)
+
+    def _on_diagnostics(self) -> None:
+        try:
+            config = self._config
+            if config is None:
+                return
+            now = self._now_s()
+            statuses = diagnostic_statuses(
+                self._latest,
+                self._inputs.health(now),
+                config.estimator.diagnostics,
+                config.estimator.rated_load_n,
+                config.hardware_id,
+                now,
+                self._events.events(),
+            )
+            statuses.append(persistence_status(self._persistence, config.hardware_id, now))
+            self._diagnostics_pub.publish(diagnostic_array(statuses, now))
+        except Exception as exc:
+            self._fault("diagnostics", exc)
+
+    def _on_save(self) -> None:
+        try:
+            self._save()
+        except Exception as exc:
+            self._fault("save", exc)
+
+    def _save(self) -> None:
+        """Save the state if it changed since the last save (errors reported, not raised)."""
+        estimator, store = self._estimator, self._store
+        if estimator is None or store is None:
+            return
+        samples = estimator.counters.accepted + estimator.counters.rejected_total
+        if samples == self._saved_at_samples:
+            return
+        try:
+            store.save(estimator)
+        except OSError as exc:
+            self._persistence = dataclasses.replace(self._persistence, save_error=str(exc))
+            self.get_logger().error(f"cannot save the state: {exc}", throttle_duration_sec=1.0)
+            return
+        self._saved_at_samples = samples
+        self._persistence = dataclasses.replace(
+            self._persistence,
+            last_save_s=self._now_s(),
+            saves=self._persistence.saves + 1,
+            save_error=None,
+        )
+
+
+def main(argv: Sequence[str] | None = None) -> int:
+    """Run the node until SIGINT/SIGTERM; then shut it down with the state saved."""
+    args = list(sys.argv if argv is None else argv)
+    extra = remove_ros_args(args)[1:]
+    if extra:
+        print(
+            f"prsm-health-node: unexpected arguments {extra}; parameters go after --ros-args,"
+            " e.g. --ros-args -p hardware_id:=left",
+            file=sys.stderr,
+        )
+        return 2
+    with ros_session(args) as stop:
+        node = HealthNode()
+        executor = SingleThreadedExecutor()
+        executor.add_node(node)
+        try:
+            node.autostart()
+            while not stop.is_set() and ok():
+                executor.spin_once(timeout_sec=SPIN_TIMEOUT_S)
+            node.trigger_shutdown()
+        finally:
+            executor.shutdown()
+            node.destroy_node()
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())

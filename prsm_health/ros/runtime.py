@@ -1,0 +1,69 @@
+"""Process-level rclpy setup shared by the node and the tools: init, signals, message types.
+
+:func:`ros_session` initialises rclpy without its own signal handlers and turns SIGINT and
+SIGTERM into a stop flag, so that every program ends its loop cleanly (the node saves its
+state, the player waits for its messages to be acknowledged) instead of being torn down in the
+middle of a callback.
+"""
+
+from __future__ import annotations
+
+import importlib
+import signal
+import threading
+from collections.abc import Iterator, Mapping, Sequence
+from contextlib import contextmanager
+from pathlib import Path
+from types import FrameType
+from typing import Any
+
+import rclpy
+from rclpy.signals import SignalHandlerOptions
+from rclpy.utilities import try_shutdown
+
+
+@contextmanager
+def ros_session(args: Sequence[str] | None = None) -> Iterator[threading.Event]:
+    """rclpy initialised with ``args`` (ROS arguments); yields the event SIGINT/SIGTERM set."""
+    stop = threading.Event()
+
+    def request_stop(signum: int, frame: FrameType | None) -> None:
+        stop.set()
+
+    rclpy.init(
+        args=list(args) if args is not None else None,
+        signal_handler_options=SignalHandlerOptions.NO,
+    )
+    previous = {sig: signal.signal(sig, request_stop) for sig in (signal.SIGINT, signal.SIGTERM)}
+    try:
+        yield stop
+    finally:
+        for sig, handler in previous.items():
+            signal.signal(sig, handler)
+        try_shutdown()
+
+
+def message_class(type_name: str) -> Any:
+    """The Python class of a ROS message type named ``pkg/msg/Name``.
+
+    Raises LookupError naming the type if its package is not installed.
+    """
+    parts = type_name.split("/")
+    try:
+        if len(parts) != 3:
+            raise ValueError("expected pkg/msg/Name")
+        return getattr(importlib.import_module(f"{parts[0]}.{parts[1]}"), parts[2])
+    except (ImportError, AttributeError, ValueError) as exc:
+        raise LookupError(f"message type {type_name!r} is not installed ({exc})") from exc
+
+
+def loopback_env(base: Mapping[str, str], domain_id: int) -> dict[str, str]:
+    """``base`` with the DDS rules of this project: discovery on localhost only, UDPv4 (no
+    shared memory), logs in ``ROS_LOG_DIR`` (``build/ros_log`` by default), and a domain id
+    (``ROS_DOMAIN_ID`` if ``base`` has one, else ``domain_id``)."""
+    env = dict(base)
+    env["ROS_AUTOMATIC_DISCOVERY_RANGE"] = "LOCALHOST"
+    env["FASTDDS_BUILTIN_TRANSPORTS"] = "UDPv4"
+    env.setdefault("ROS_LOG_DIR", str(Path("build", "ros_log").resolve()))
+    env.setdefault("ROS_DOMAIN_ID", str(domain_id))
+    return env

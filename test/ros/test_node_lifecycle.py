@@ -1,0 +1,91 @@
+"""Lifecycle and parameters with real processes: bad values refused by name, inactive silent."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import pytest
+
+from prsm_health.outputs import INPUT_HEALTH
+from test.ros.harness import Listener, NodeProcess
+
+
+@pytest.mark.timeout(60)
+def test_invalid_parameters_fail_configure_by_name(ros: None, tmp_path: Path) -> None:
+    listener = Listener("bad_params")
+    try:
+        with NodeProcess(
+            tmp_path,
+            "bad_params",
+            hardware_id="bad_params",
+            state_file=str(tmp_path / "state.json"),
+            health_rate_hz=-1.0,
+            input_type="bogus",
+            diagnostics_rate_hz=5,  # an integer for a double
+        ) as node:
+            node.wait_log("configure failed")
+            log = node.log()
+            assert "parameter health_rate_hz" in log and "out of range" in log
+            assert "parameter input_type: must be one of motor_state, joint_state" in log
+            assert "parameter diagnostics_rate_hz" in log and "INTEGER" in log
+            assert node.alive()
+            assert listener.lifecycle_state() == "unconfigured"
+            assert not listener.transition("configure")  # still refused, nothing changed
+
+            # Fixed through the lifecycle, without a restart.
+            assert listener.set_parameter("health_rate_hz", 0.0) == (True, "")
+            assert listener.set_parameter("input_type", "motor_state") == (True, "")
+            ok, reason = listener.set_parameter("input_type", "can_bus")
+            assert not ok and "parameter input_type: must be one of" in reason
+            assert listener.set_parameter("diagnostics_rate_hz", 5.0) == (True, "")
+            assert listener.transition("configure")
+            assert listener.lifecycle_state() == "inactive"
+            ok, reason = listener.set_parameter("hardware_id", "other")
+            assert not ok and "applied at configure" in reason
+            assert listener.transition("activate")
+            listener.wait_for(
+                lambda: INPUT_HEALTH in listener.statuses("bad_params"), 5.0, "diagnostics"
+            )
+    finally:
+        listener.close()
+
+
+@pytest.mark.timeout(60)
+def test_inactive_node_publishes_nothing(ros: None, tmp_path: Path) -> None:
+    listener = Listener("lifecycle")
+
+    def published() -> int:
+        return len(listener.statuses_of("lifecycle")) + len(listener.health)
+
+    try:
+        with NodeProcess(
+            tmp_path,
+            "lifecycle",
+            hardware_id="lifecycle",
+            state_file=str(tmp_path / "state.json"),
+            autostart=False,
+            diagnostics_rate_hz=20.0,
+        ) as node:
+            node.wait_log("autostart is false")
+            assert listener.lifecycle_state() == "unconfigured"
+            assert listener.transition("configure")
+            assert listener.lifecycle_state() == "inactive"
+            listener.spin(1.0)  # 20 diagnostics if it were active
+            assert published() == 0
+            subscribers = listener.node.get_subscriptions_info_by_topic("/motor_state")
+            assert not [s for s in subscribers if s.node_name == "lifecycle"]
+
+            assert listener.transition("activate")
+            listener.wait_for(lambda: published() > 0, 5.0, "diagnostics once active")
+            assert listener.node.get_subscriptions_info_by_topic("/motor_state")
+
+            assert listener.transition("deactivate")
+            listener.spin(0.3)  # what was already on the way
+            count = published()
+            listener.spin(1.0)
+            assert published() == count
+            assert listener.transition("cleanup")
+            assert listener.lifecycle_state() == "unconfigured"
+            assert node.alive()
+    finally:
+        listener.close()
