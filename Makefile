@@ -66,9 +66,13 @@ lint: venv
 test: venv lint
 	timeout -k 30 $(TEST_RUN_TIMEOUT) $(VENV)/bin/pytest
 
+# The ROS demo (prsm_health/ros/demo.py): the node, bags/sudden-jam played into it at twice its
+# speed, the live monitor, then a summary beside the ground truth. Loopback only, its own
+# domain id, and a hard time limit (the demo's own, then SIGTERM/SIGKILL from timeout).
+DEMO_TIMEOUT ?= 300
 demo: export ROS_DOMAIN_ID ?= 42
 demo: venv
-	$(VENV)/bin/prsm-health demo
+	timeout -k 10 $$(( $(DEMO_TIMEOUT) + 30 )) $(VENV)/bin/prsm-health demo --timeout $(DEMO_TIMEOUT)
 
 # The bundled bags (bags/README.md): regenerate every one, then check that a second
 # regeneration is byte-identical (cmp of metadata.yaml and the .mcap of each bag).

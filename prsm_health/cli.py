@@ -1,9 +1,10 @@
 """Command-line entry point ``prsm-health``.
 
 Subcommands:
-  model   evaluate the PRSM physics at one operating point (table or --json)
-  demo    the model for every bundled preset at its paper's largest load
-  simulate  run a scene of the truth simulator into a rosbag2 MCAP bag
+  model       evaluate the PRSM physics at one operating point (table or --json)
+  model-demo  the model for every bundled preset at its paper's largest load
+  play, monitor, demo   the ROS tools (prsm_health/ros/tools.py)
+  simulate    run a scene of the truth simulator into a rosbag2 MCAP bag
 Units at this edge are the engineers' ones (N, rpm, arcmin, mm, um/h); inside all is SI.
 """
 
@@ -25,6 +26,7 @@ from prsm_health.physics.geometry import Misalignment
 from prsm_health.physics.load_distribution import LoadingCase
 from prsm_health.physics.model import ModelResult, OperatingPoint, evaluate
 from prsm_health.physics.presets import PRESET_NAMES, load_preset
+from prsm_health.ros.tools import add_ros_commands
 from prsm_health.scenes.recording import record
 from prsm_health.scenes.scene import load_scene, scene_names
 from prsm_health.scenes.simulator import Simulator
@@ -97,7 +99,8 @@ def _build_parser() -> _Parser:
     simulate.add_argument("--out", required=True, type=Path, metavar="PATH", help="bag directory")
     simulate.add_argument("--force", action="store_true", help="replace an existing bag at PATH")
 
-    commands.add_parser("demo", help="model every bundled preset at its largest paper load")
+    commands.add_parser("model-demo", help="model every bundled preset at its largest paper load")
+    add_ros_commands(commands)
     return parser
 
 
@@ -218,6 +221,8 @@ def _run_simulate(args: argparse.Namespace) -> int:
 def main(argv: Sequence[str] | None = None) -> int:
     """Run ``prsm-health``; physics errors become a one-line message and exit code 2."""
     args = _build_parser().parse_args(argv)
+    if "ros_command" in args:
+        return int(args.ros_command(args))
     try:
         if args.command == "model":
             return _run_model(args)

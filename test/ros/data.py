@@ -1,4 +1,4 @@
-"""Test data for the node: synthetic motor samples and small rosbag2 bags made from them.
+"""Test data for the node: synthetic motor samples, short simulated scenes, small bags.
 
 The samples are the estimator's kind of input: a constant-speed run of the dong2022-downhole
 actuator under a 30 kN load; optionally, from ``jam_at_s`` on, the current steps up by 35 %
@@ -8,6 +8,7 @@ docs/estimation.md). Bags are written with :mod:`prsm_health.bags` (log time = s
 
 from __future__ import annotations
 
+import dataclasses
 import math
 from pathlib import Path
 
@@ -17,6 +18,9 @@ from prsm_health.actuator import DriveTrain, load_torque_nm
 from prsm_health.bags.writer import BagWriter, write_motor_states
 from prsm_health.physics.meshing import carrier_speed_rad_s
 from prsm_health.physics.presets import load_preset
+from prsm_health.scenes.recording import record
+from prsm_health.scenes.scene import Scene, load_scene
+from prsm_health.scenes.simulator import Simulator
 from prsm_health.signals import MotorSamples
 
 RATE_HZ = 1000.0
@@ -65,4 +69,17 @@ def write_bag(path: Path, samples: MotorSamples) -> Path:
     """A rosbag2 (MCAP) directory with one MotorState per sample on /motor_state."""
     with BagWriter(path) as writer:
         write_motor_states(writer, samples)
+    return path
+
+
+def short_jam_scene(duration_s: float) -> Scene:
+    """The first ``duration_s`` of the bundled sudden-jam scene, with its first jam only
+    (roller 4 at 4.5 s, in the first forward stroke)."""
+    scene = load_scene("sudden-jam")
+    return dataclasses.replace(scene, duration_s=duration_s, jams=scene.jams[:1])
+
+
+def simulated_bag(path: Path, scene: Scene) -> Path:
+    """The truth simulator's bag of ``scene`` (/motor_state and /truth/state)."""
+    record(Simulator(scene), path)
     return path

@@ -1,0 +1,186 @@
+"""``prsm-health play``: publish a rosbag2 bag's messages over DDS with their original timing.
+
+A replacement for ``ros2 bag play`` (not on PyPI for Jazzy). Messages are read raw with
+rosbags (MCAP or SQLite rosbag2 directories) and published as the serialized CDR bytes they
+are, through rclpy publishers of their types, in log-time order, at ``log time / rate`` after
+the start. Optionally ``/clock`` (rosgraph_msgs/Clock) carries the log time, for nodes with
+``use_sim_time``. Publishers are reliable (a best-effort subscriber matches them as well) and
+keep ``PUBLISHER_DEPTH`` messages.
+
+``wait_for_subscribers_s``: before the first message, wait until every played topic (and
+``/clock`` if published) has a subscriber (at most that long; error otherwise), then
+:data:`SETTLE_S` more so that the subscriber side of discovery completes too: a best-effort
+subscriber drops what arrives before it has matched the publisher. At the end the player
+waits for reliable subscribers to acknowledge everything, so a short bag is not cut off.
+"""
+
+from __future__ import annotations
+
+import threading
+import time
+from collections import Counter
+from collections.abc import Sequence
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+import rclpy
+from rclpy.duration import Duration
+from rclpy.qos import QoSProfile, QoSReliabilityPolicy
+from rosbags.rosbag2 import Reader, ReaderError
+from rosgraph_msgs.msg import Clock
+
+from prsm_health.ros.messages import time_msg
+from prsm_health.ros.runtime import message_class
+
+#: History of each publisher: 10 s at 1 kHz, so a reliable subscriber that falls behind
+#: for a while catches up without losses.
+PUBLISHER_DEPTH = 10_000
+#: After the publishers have matched their subscribers, time for the subscribers to match
+#: the publishers [s].
+SETTLE_S = 0.3
+#: How long the end of the play waits for acknowledgements [s].
+ACK_TIMEOUT_S = 5.0
+NS_PER_S = 1e9
+
+
+class PlayError(RuntimeError):
+    """The bag cannot be played (unreadable, unknown topic or type, no subscriber)."""
+
+
+@dataclass(frozen=True, kw_only=True)
+class PlayOptions:
+    """rate: speed factor of the log time. clock: publish /clock at clock_rate_hz of bag
+    time. topics: only these (all if empty). loop: start again at the end until stopped.
+    wait_for_subscribers_s: see the module docstring (0: do not wait)."""
+
+    rate: float = 1.0
+    clock: bool = False
+    clock_rate_hz: float = 100.0
+    topics: tuple[str, ...] = ()
+    loop: bool = False
+    wait_for_subscribers_s: float = 0.0
+
+    def __post_init__(self) -> None:
+        if not (self.rate > 0.0 and self.clock_rate_hz > 0.0):
+            raise PlayError(
+                f"rate and clock rate must be > 0, got {self.rate}, {self.clock_rate_hz}"
+            )
+        if self.wait_for_subscribers_s < 0.0:
+            raise PlayError("the wait for subscribers must be >= 0 s")
+
+
+@dataclass
+class PlayReport:
+    """Messages published per topic, passes through the bag, and the largest lateness [s]."""
+
+    published: Counter[str] = field(default_factory=Counter)
+    passes: int = 0
+    max_late_s: float = 0.0
+    interrupted: bool = False
+
+
+class _Clock:
+    """Publishes the bag time on /clock at most every ``1 / rate_hz`` of bag time."""
+
+    def __init__(self, node: Any, rate_hz: float) -> None:
+        qos = QoSProfile(depth=10, reliability=QoSReliabilityPolicy.RELIABLE)
+        self.publisher = node.create_publisher(Clock, "/clock", qos)
+        self._period_ns = int(NS_PER_S / rate_hz)
+        self._last_ns: int | None = None
+
+    def tick(self, log_time_ns: int) -> None:
+        if self._last_ns is None or not 0 <= log_time_ns - self._last_ns < self._period_ns:
+            self.publisher.publish(Clock(clock=time_msg(log_time_ns / NS_PER_S)))
+            self._last_ns = log_time_ns
+
+
+def _wait_for_subscribers(
+    publishers: dict[str, Any], timeout_s: float, stop: threading.Event
+) -> None:
+    deadline = time.monotonic() + timeout_s
+    while missing := [t for t, p in publishers.items() if p.get_subscription_count() == 0]:
+        if time.monotonic() > deadline:
+            raise PlayError(f"no subscriber after {timeout_s:g} s on {', '.join(missing)}")
+        if stop.wait(0.02):
+            return
+    stop.wait(SETTLE_S)
+
+
+def play(bag: Path, options: PlayOptions, stop: threading.Event) -> PlayReport:
+    """Play ``bag`` (rclpy must be initialised) until its end, or until ``stop`` is set."""
+    try:
+        reader = Reader(bag)
+        reader.open()
+    except (ReaderError, OSError) as exc:
+        raise PlayError(f"cannot open bag {bag}: {exc}") from exc
+    try:
+        return _play(reader, options, stop)
+    finally:
+        reader.close()
+
+
+def _play(reader: Reader, options: PlayOptions, stop: threading.Event) -> PlayReport:
+    available = {c.topic for c in reader.connections}
+    unknown = sorted(set(options.topics) - available)
+    if unknown:
+        raise PlayError(
+            f"no topic {', '.join(unknown)} in the bag; it has {', '.join(sorted(available))}"
+        )
+    connections = [c for c in reader.connections if not options.topics or c.topic in options.topics]
+    node = rclpy.create_node("prsm_health_player")
+    try:
+        qos = QoSProfile(depth=PUBLISHER_DEPTH, reliability=QoSReliabilityPolicy.RELIABLE)
+        publishers: dict[str, Any] = {}
+        for connection in connections:
+            if connection.topic not in publishers:
+                try:
+                    cls = message_class(connection.msgtype)
+                except LookupError as exc:
+                    raise PlayError(f"topic {connection.topic}: {exc}") from exc
+                publishers[connection.topic] = node.create_publisher(cls, connection.topic, qos)
+        clock = _Clock(node, options.clock_rate_hz) if options.clock else None
+        if options.wait_for_subscribers_s > 0.0:
+            waited = {**publishers, **({"/clock": clock.publisher} if clock else {})}
+            _wait_for_subscribers(waited, options.wait_for_subscribers_s, stop)
+        report = PlayReport()
+        while not stop.is_set():
+            _one_pass(reader, connections, publishers, clock, options.rate, stop, report)
+            report.passes += 1
+            if not options.loop:
+                break
+        report.interrupted = stop.is_set()
+        for publisher in publishers.values():
+            publisher.wait_for_all_acked(Duration(seconds=ACK_TIMEOUT_S))
+        return report
+    finally:
+        node.destroy_node()
+
+
+def _one_pass(
+    reader: Reader,
+    connections: Sequence[Any],
+    publishers: dict[str, Any],
+    clock: _Clock | None,
+    rate: float,
+    stop: threading.Event,
+    report: PlayReport,
+) -> None:
+    start: float | None = None  # at the first message: reading the first chunk takes time
+    first_ns = 0
+    for connection, log_time_ns, raw in reader.messages(connections=connections):
+        if start is None:
+            start, first_ns = time.monotonic(), log_time_ns
+        target = start + (log_time_ns - first_ns) / NS_PER_S / rate
+        delay = target - time.monotonic()
+        if delay > 0.0:
+            if stop.wait(delay):
+                return
+        else:
+            report.max_late_s = max(report.max_late_s, -delay)
+        if clock is not None:
+            clock.tick(log_time_ns)
+        publishers[connection.topic].publish(bytes(raw))
+        report.published[connection.topic] += 1
+        if stop.is_set():
+            return

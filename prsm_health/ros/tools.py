@@ -1,0 +1,130 @@
+"""The ROS subcommands of ``prsm-health``: play, monitor, demo.
+
+:func:`add_ros_commands` registers them on the CLI's subparsers; each sets ``ros_command`` to
+its runner. rclpy is imported only when one of them runs, so ``prsm-health model`` works
+without ROS.
+"""
+
+from __future__ import annotations
+
+import argparse
+import math
+import sys
+from pathlib import Path
+from typing import TypeVar
+
+Parser = TypeVar("Parser", bound=argparse.ArgumentParser)
+#: The scene bag ``make demo`` plays (made by ``prsm-health simulate``, see bags/).
+DEMO_BAG = Path("bags", "sudden-jam")
+
+
+def _positive(text: str) -> float:
+    value = float(text)
+    if not (math.isfinite(value) and value > 0.0):
+        raise argparse.ArgumentTypeError(f"must be a finite number > 0, got {text!r}")
+    return value
+
+
+def _non_negative(text: str) -> float:
+    value = float(text)
+    if not (math.isfinite(value) and value >= 0.0):
+        raise argparse.ArgumentTypeError(f"must be a finite number >= 0, got {text!r}")
+    return value
+
+
+def _count(text: str) -> int:
+    value = int(text)
+    if value < 0:
+        raise argparse.ArgumentTypeError(f"must be >= 0, got {text!r}")
+    return value
+
+
+def add_ros_commands(commands: argparse._SubParsersAction[Parser]) -> None:
+    """Add ``play``, ``monitor`` and ``demo`` to the ``prsm-health`` subparsers."""
+    play = commands.add_parser("play", help="publish a bag's messages over DDS with their timing")
+    play.add_argument("bag", type=Path, help="rosbag2 directory (MCAP or SQLite)")
+    play.add_argument("--rate", type=_positive, default=1.0, help="speed factor (default 1)")
+    play.add_argument("--clock", action="store_true", help="publish /clock (bag log time)")
+    play.add_argument("--clock-rate", type=_positive, default=100.0, metavar="HZ")
+    play.add_argument("--topics", nargs="+", default=[], metavar="TOPIC", help="only these")
+    play.add_argument("--loop", action="store_true", help="start again at the end")
+    play.add_argument(
+        "--wait-for-subscribers",
+        type=_non_negative,
+        default=0.0,
+        metavar="S",
+        help="wait up to S seconds for a subscriber on every played topic (default: no wait)",
+    )
+    play.set_defaults(ros_command=_run_play)
+
+    monitor = commands.add_parser("monitor", help="live table of the node's health/diagnostics")
+    monitor.add_argument("--node", default="/prsm_health", help="node name (default /prsm_health)")
+    monitor.add_argument("--json", action="store_true", help="one JSON object per message")
+    monitor.add_argument("--count", type=_count, default=0, metavar="N", help="stop after N")
+    monitor.add_argument("--timeout", type=_non_negative, default=0.0, metavar="S")
+    monitor.set_defaults(ros_command=_run_monitor)
+
+    demo = commands.add_parser("demo", help="node + bag + monitor on loopback, then a summary")
+    demo.add_argument("--bag", type=Path, default=DEMO_BAG, help=f"default {DEMO_BAG}")
+    demo.add_argument("--rate", type=_positive, default=2.0, help="playback speed (default 2)")
+    demo.add_argument(
+        "--timeout", type=_positive, default=300.0, metavar="S", help="hard limit (default 300)"
+    )
+    demo.add_argument("--workdir", type=Path, default=Path("build", "demo"), metavar="DIR")
+    demo.set_defaults(ros_command=_run_demo)
+
+
+def _run_play(args: argparse.Namespace) -> int:
+    from prsm_health.ros.player import PlayError, PlayOptions, play
+    from prsm_health.ros.runtime import ros_session
+
+    try:
+        options = PlayOptions(
+            rate=args.rate,
+            clock=args.clock,
+            clock_rate_hz=args.clock_rate,
+            topics=tuple(args.topics),
+            loop=args.loop,
+            wait_for_subscribers_s=args.wait_for_subscribers,
+        )
+        with ros_session() as stop:
+            report = play(args.bag, options, stop)
+    except PlayError as exc:
+        print(f"prsm-health play: error: {exc}", file=sys.stderr)
+        return 1
+    topics = ", ".join(f"{topic} {n}" for topic, n in sorted(report.published.items()))
+    state = "interrupted" if report.interrupted else "done"
+    print(
+        f"play {state}: {topics or 'nothing'} published in {report.passes} pass(es);"
+        f" largest lateness {report.max_late_s * 1e3:.1f} ms"
+    )
+    return 0
+
+
+def _run_monitor(args: argparse.Namespace) -> int:
+    from prsm_health.ros.monitor import Monitor, MonitorOptions
+    from prsm_health.ros.runtime import ros_session
+
+    options = MonitorOptions(
+        node=args.node, json=args.json, count=args.count, timeout_s=args.timeout
+    )
+    with ros_session() as stop:
+        monitor = Monitor(options)
+        try:
+            complete = monitor.run(stop)
+        finally:
+            monitor.close()
+    if not complete:
+        wanted = f"{options.count} records" if options.count else "any message"
+        print(f"prsm-health monitor: {monitor.records} printed, {wanted} wanted", file=sys.stderr)
+    return 0 if complete else 1
+
+
+def _run_demo(args: argparse.Namespace) -> int:
+    from prsm_health.ros.demo import DemoError, run_demo
+
+    try:
+        return run_demo(args.bag, rate=args.rate, timeout_s=args.timeout, workdir=args.workdir)
+    except DemoError as exc:
+        print(f"prsm-health demo: error: {exc}", file=sys.stderr)
+        return 1

@@ -1,0 +1,82 @@
+"""Inputs stop: every estimator status goes STALE within the timeout; inputs resume: it
+recovers (real processes, the node's clock is the system clock here)."""
+
+from __future__ import annotations
+
+from pathlib import Path
+from typing import Any
+
+import pytest
+
+from prsm_health.outputs import AXIAL_LOAD, INPUT_HEALTH, JAMMED_ROLLERS, STATUS_NAMES
+from test.ros.data import ORIGIN_S, synthetic_run, write_bag
+from test.ros.harness import Listener, NodeProcess, play
+
+STALE_TIMEOUT_S = 0.5
+DIAGNOSTICS_RATE_HZ = 10.0
+HARDWARE_ID = "stale_test"
+
+
+def params_file(tmp: Path, **diagnostics: float) -> Path:
+    """The bundled parameters with other diagnostics thresholds."""
+    lines = ["actuator: {preset: dong2022-downhole}", "diagnostics:"]
+    lines += [f"  {key}: {value}" for key, value in diagnostics.items()]
+    path = tmp / "params.yaml"
+    path.write_text("\n".join(lines) + "\n")
+    return path
+
+
+@pytest.mark.timeout(90)
+def test_stale_then_recovered(ros: None, tmp_path: Path) -> None:
+    first = write_bag(tmp_path / "first", synthetic_run(2.0))
+    later = ORIGIN_S + 4.0
+    second = write_bag(tmp_path / "second", synthetic_run(2.0, start_s=later, from_rest=False))
+    listener = Listener()
+    try:
+        with NodeProcess(
+            tmp_path,
+            params_file=str(params_file(tmp_path, stale_timeout_s=STALE_TIMEOUT_S)),
+            hardware_id=HARDWARE_ID,
+            state_file=str(tmp_path / "state.json"),
+            diagnostics_rate_hz=DIAGNOSTICS_RATE_HZ,
+        ) as node:
+            node.wait_log("configured")
+
+            def series() -> list[tuple[float, dict[str, dict[str, Any]]]]:
+                """(node-clock stamp, estimator statuses) of every diagnostics message."""
+                return [
+                    (d["stamp"], {s["name"]: s for s in d["status"] if s["name"] in STATUS_NAMES})
+                    for d in listener.diagnostics
+                    if d["status"][0]["hardware_id"] == HARDWARE_ID
+                ]
+
+            def stale(statuses: dict[str, dict[str, Any]]) -> bool:
+                levels = {s["level"] for s in statuses.values()}
+                return len(statuses) == len(STATUS_NAMES) and levels == {"STALE"}
+
+            listener.wait_for(lambda: bool(series()) and stale(series()[-1][1]), 20.0, "STALE")
+            assert series()[-1][1][AXIAL_LOAD]["message"].startswith("stale: no input yet")
+
+            before = len(series())
+            play(first, listener=listener)
+            listener.wait_for(lambda: stale(series()[-1][1]), 5.0, "STALE after the inputs")
+            during = series()[before:]
+            last_fresh = max(i for i, (_, st) in enumerate(during) if not stale(st))
+            (fresh_at, fresh), (stale_at, first_stale) = during[last_fresh : last_fresh + 2]
+            assert stale(first_stale)
+            assert not {s["level"] for s in fresh.values()} & {"STALE", "ERROR"}
+            # The node's own clock: STALE from the first diagnostics after the inputs are older
+            # than the timeout, not before, not later.
+            age = [float(st[INPUT_HEALTH]["values"]["input_age_s"]) for st in (fresh, first_stale)]
+            assert age[0] <= STALE_TIMEOUT_S < age[1]
+            assert age[1] - age[0] == pytest.approx(stale_at - fresh_at, abs=1e-6)
+            message = first_stale[JAMMED_ROLLERS]["message"]
+            assert message.startswith("stale: no input for")
+            assert "last: no jammed roller" in message
+
+            play(second, listener=listener)
+            listener.wait_for(lambda: not stale(series()[-1][1]), 5.0, "recovery")
+            assert {s["level"] for s in series()[-1][1].values()} <= {"OK", "WARN"}
+            assert node.alive()
+    finally:
+        listener.close()

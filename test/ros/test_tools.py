@@ -1,0 +1,103 @@
+"""prsm-health play, monitor and demo from the command line (real processes)."""
+
+from __future__ import annotations
+
+import subprocess
+import sys
+from pathlib import Path
+
+import pytest
+
+from prsm_health.outputs import Level
+from prsm_health.ros.monitor import table
+from test.ros.data import short_jam_scene, simulated_bag, synthetic_run, write_bag
+
+
+def cli(*args: str, timeout_s: float = 60.0) -> subprocess.CompletedProcess[str]:
+    return subprocess.run(
+        [sys.executable, "-m", "prsm_health", *args],
+        capture_output=True,
+        text=True,
+        timeout=timeout_s,
+        check=False,
+    )
+
+
+def test_play_refuses_what_it_cannot_play(tmp_path: Path) -> None:
+    missing = cli("play", str(tmp_path / "none"))
+    assert missing.returncode == 1
+    assert f"cannot open bag {tmp_path / 'none'}" in missing.stderr
+    bag = write_bag(tmp_path / "bag", synthetic_run(0.1))
+    unknown = cli("play", str(bag), "--topics", "/nope")
+    assert unknown.returncode == 1
+    assert "no topic /nope in the bag; it has /motor_state" in unknown.stderr
+    bad_rate = cli("play", str(bag), "--rate", "0")
+    assert bad_rate.returncode == 2
+    assert "must be a finite number > 0" in bad_rate.stderr
+    nobody = cli("play", str(bag), "--wait-for-subscribers", "0.5")
+    assert nobody.returncode == 1
+    assert "no subscriber after 0.5 s on /motor_state" in nobody.stderr
+
+
+def test_play_publishes_every_message(tmp_path: Path) -> None:
+    bag = write_bag(tmp_path / "bag", synthetic_run(0.5))
+    done = cli("play", str(bag), "--rate", "5", "--clock")
+    assert done.returncode == 0, done.stderr
+    assert "play done: /motor_state 500 published in 1 pass(es)" in done.stdout
+
+
+def test_monitor_times_out_without_a_node() -> None:
+    done = cli("monitor", "--count", "1", "--timeout", "0.5")
+    assert done.returncode == 1
+    assert "0 printed, 1 records wanted" in done.stderr
+
+
+def test_monitor_table() -> None:
+    health = {
+        "stamp": 12.5,
+        "axial_load_n": 30500.0,
+        "axial_load_std_n": 250.0,
+        "jammed_rollers_most_likely": 1,
+        "jammed_rollers_probability": [0.02, 0.97, 0.01],
+        "precision_loss_um": 1.25,
+        "precision_loss_rate_um_per_h": 3.5,
+        "fatigue_damage": 0.001,
+    }
+    status = {
+        "name": "prsm_health: jammed rollers",
+        "level": Level.ERROR.name,
+        "message": "1 jammed roller (p = 0.97)",
+    }
+    text = table(health, {"status": [status]})
+    assert text.splitlines() == [
+        "t 12.50 s  load 30.50 +- 0.25 kN  jammed 1 (p 0.97)  loss 1.25 um (3.5 um/h)"
+        "  fatigue 0.001",
+        "  ERROR jammed rollers     1 jammed roller (p = 0.97)",
+    ]
+    assert table(None, {"status": []}) == "no estimate yet"
+
+
+@pytest.mark.timeout(120)
+def test_demo_runs_node_player_and_monitor(tmp_path: Path) -> None:
+    bag = simulated_bag(tmp_path / "jam", short_jam_scene(8.0))
+    done = cli(
+        "demo",
+        "--bag",
+        str(bag),
+        "--rate",
+        "4",
+        "--workdir",
+        str(tmp_path / "demo"),
+        timeout_s=100.0,
+    )
+    assert done.returncode == 0, done.stdout + done.stderr
+    out = done.stdout
+    assert "loopback only" in out
+    assert "ERROR jammed rollers     1 jammed roller" in out  # the live table
+    summary = out[out.index("summary at bag time") :]
+    assert "jammed rollers  1 most likely" in summary
+    assert "truth           " in summary and "1 jammed" in summary  # from /truth/state
+    assert "axial load" in summary and "precision loss" in summary
+    assert "ERROR prsm_health: jammed rollers: 1 jammed roller" in summary
+    assert (tmp_path / "demo" / "node.log").read_text().count("configured") == 1
+    assert (tmp_path / "demo" / "state.json").is_file()  # saved at the node's shutdown
