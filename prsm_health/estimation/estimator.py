@@ -34,6 +34,14 @@ from prsm_health.signals import MotorSamples
 GATED_BLOCKS_BEFORE_RESET = 5
 #: The NIS divergence test needs at least this many blocks in its window.
 MIN_BLOCKS_FOR_DIVERGENCE = 10
+#: A block whose first sample comes more than this many block periods after the previous
+#: block's last one follows a hole in the data (dropouts, rejected samples): the load may
+#: have moved on unseen.
+HOLE_BLOCKS = 3.0
+#: After a hole, jam evidence is not used for this long, while the load is found again: a
+#: load that changed inside the hole would otherwise look like a jam.
+REACQUIRE_S = 0.25
+
 #: Version of the :meth:`HealthEstimator.snapshot` layout.
 SNAPSHOT_FORMAT = 1
 
@@ -74,6 +82,7 @@ class HealthEstimator:
         self._standstill: list[Block] = []
         self._nis: deque[tuple[float, float]] = deque()
         self._gated_run = 0
+        self._blind_until_s = -math.inf
 
     @property
     def counters(self) -> InputCounters:
@@ -181,7 +190,12 @@ class HealthEstimator:
             self._bank.reinitialise_load()
             self._nis.clear()
             event = EstimateEvent.TIME_RESET
-        step = self._bank.step(block)
+        hole = block.silence_before_s > HOLE_BLOCKS * self.params.filter.block_duration_s
+        if hole and not block.time_reset:
+            self._bank.reinitialise_load(keep_load=True)
+        if block.time_reset or hole:
+            self._blind_until_s = block.stamp_s + REACQUIRE_S
+        step = self._bank.step(block, evidence=block.stamp_s > self._blind_until_s)
         if self._diverged(block, step):
             self._bank.reinitialise_load()
             self._nis.clear()

@@ -61,15 +61,29 @@ def safe_sqrt(matrix: FloatArray) -> FloatArray:
         return np.asarray(np.linalg.cholesky(repair_covariance(symmetric)).T, dtype=np.float64)
 
 
+#: Smallest eigenvalue kept in a covariance's correlation matrix (its shape, free of units).
+CORRELATION_FLOOR = 1e-9
+
+
 def repair_covariance(matrix: FloatArray, floor: FloatArray | None = None) -> FloatArray:
-    """Symmetric positive definite version of ``matrix``: eigenvalues clipped to a floor."""
+    """Symmetric positive definite version of ``matrix``.
+
+    The states have very different units (N, N/s^2, relative ripple), so definiteness is
+    judged and repaired on the correlation matrix D^-1/2 P D^-1/2: its eigenvalues are clipped
+    to CORRELATION_FLOOR, and the variances to ``floor``.
+    """
     symmetric = 0.5 * (matrix + matrix.T)
-    values, vectors = np.linalg.eigh(symmetric)
-    smallest = max(float(np.abs(values).max()) * 1e-12, 1e-300)
+    variances = np.abs(np.diagonal(symmetric))
     if floor is not None:
-        smallest = max(smallest, float(floor.min()))
-    values = np.maximum(values, smallest)
-    return np.asarray((vectors * values) @ vectors.T, dtype=np.float64)
+        variances = np.maximum(variances, floor)
+    variances = np.maximum(variances, 1e-300)
+    scale = np.sqrt(variances)
+    correlation = symmetric / np.outer(scale, scale)
+    np.fill_diagonal(correlation, 1.0)
+    values, vectors = np.linalg.eigh(correlation)
+    values = np.maximum(values, CORRELATION_FLOOR)
+    repaired = (vectors * values) @ vectors.T
+    return np.asarray(repaired * np.outer(scale, scale), dtype=np.float64)
 
 
 @dataclass(frozen=True)
@@ -133,9 +147,11 @@ class JamHypotheses:
         kf.P = p.copy()
         return kf
 
-    def _process(self, jammed: int, dt: float) -> tuple[FloatArray, FloatArray]:
-        """Transition and process noise over dt: the load as a white-jerk (constant
-        acceleration) process, the ripple as a random walk (only when jammed)."""
+    def _process(self, jammed: int, dt: float, x: FloatArray) -> tuple[FloatArray, FloatArray]:
+        """Transition and process noise over dt from state x: the load as a white-jerk
+        (constant acceleration) process; the ripple (only when jammed) as a random walk,
+        widened by its prior size times the relative change of its load scale
+        (:meth:`TorqueModel.ripple_drift`)."""
         transition = np.eye(self._dim)
         transition[LOAD, LOAD_RATE] = transition[LOAD_RATE, LOAD_ACCELERATION] = dt
         transition[LOAD, LOAD_ACCELERATION] = dt**2 / 2.0
@@ -150,7 +166,8 @@ class JamHypotheses:
         )
         if self._ripple and jammed:
             walk = self._params.model.ripple_random_walk_per_sqrt_s
-            noise[RIPPLE_COS:, RIPPLE_COS:] = np.eye(2) * walk**2 * dt
+            drift = self._model.ripple_drift(x, dt) * self._params.model.ripple_prior_std
+            noise[RIPPLE_COS:, RIPPLE_COS:] = np.eye(2) * (walk**2 * dt + drift**2)
         return transition, noise
 
     # --- the IMM step -------------------------------------------------------------------
@@ -201,8 +218,12 @@ class JamHypotheses:
                 self.filters[j].x, self.filters[j].P = x0, p0
             self.log_prob[j] = total
 
-    def step(self, block: Block) -> StepResult:
-        """Mix, predict, update and reweight for one block (see the module docstring)."""
+    def step(self, block: Block, *, evidence: bool = True) -> StepResult:
+        """Mix, predict, update and reweight for one block (see the module docstring).
+
+        ``evidence=False``: the filters update but the probabilities are not reweighted
+        (the caller knows the block cannot tell jams from load changes).
+        """
         dt = block.duration_s
         self._mix(dt)
         predictions: dict[int, Prediction] = {}
@@ -210,7 +231,7 @@ class JamHypotheses:
         log_likelihood: dict[int, float] = {}
         z = np.array([block.motor_torque_nm])
         for k, kf in self.filters.items():
-            transition, noise = self._process(k, dt)
+            transition, noise = self._process(k, dt, kf.x)
             if isinstance(kf, UnscentedKalmanFilter):
                 kf.Q = noise
                 kf.predict(dt=dt, fx=_transition_apply, transition=transition)
@@ -238,7 +259,7 @@ class JamHypotheses:
                 kf.x, kf.P = kf.x_prior.copy(), kf.P_prior.copy()
             kf.P = self._safe_covariance(kf.P)
             predictions[k] = self._model.predict(kf.x, block, k)
-        if block.direction and not gated:
+        if evidence and block.direction and not gated:
             for k in self.filters:
                 self.log_prob[k] += log_likelihood[k]
         self._normalise()
@@ -275,13 +296,16 @@ class JamHypotheses:
         return hx
 
     def _safe_covariance(self, p: FloatArray) -> FloatArray:
-        """Symmetric, variances at least the floor, positive definite."""
+        """Symmetric, variances at least the floor, correlation matrix positive definite."""
         p = 0.5 * (p + p.T)
         diagonal = np.diagonal(p)
         if np.any(diagonal < self._floor):
             p = p + np.diag(np.maximum(self._floor - diagonal, 0.0))
+        scale = np.sqrt(np.diagonal(p))
         try:
-            np.linalg.cholesky(p)
+            root = np.linalg.cholesky(p / np.outer(scale, scale))
+            if float(np.diagonal(root).min()) ** 2 < CORRELATION_FLOOR:
+                raise np.linalg.LinAlgError("nearly singular")
         except np.linalg.LinAlgError:
             p = repair_covariance(p, self._floor)
         return p
@@ -307,15 +331,19 @@ class JamHypotheses:
         self.log_prob = {k: log_probability for k, (_, _, log_probability) in states.items()}
         self._normalise()
 
-    def reinitialise_load(self) -> None:
-        """Forget the load and its derivatives (after a time reset or a divergence)."""
+    def reinitialise_load(self, *, keep_load: bool = False) -> None:
+        """Forget the load's derivatives, and unless ``keep_load`` the load too (after a time
+        reset or a divergence; after a hole in the data, where the load may have moved on)."""
+        forget = range(LOAD + 1 if keep_load else LOAD, LOAD_STATES)
         for kf in self.filters.values():
-            p = kf.P.copy()
-            for i in range(LOAD_STATES):
+            x, p = kf.x.copy(), kf.P.copy()
+            for i in forget:
+                if i != LOAD:
+                    x[i] = 0.0
                 p[i, :] = 0.0
                 p[:, i] = 0.0
                 p[i, i] = self._initial_var[i]
-            kf.P = p
+            kf.x, kf.P = x, p
 
 
 def _constant(value: FloatArray) -> Any:

@@ -33,7 +33,7 @@ BoolArray = NDArray[np.bool_]
 #: agree with each other, is a spike.
 SPIKE_SIGMAS = 12.0
 #: This many identical consecutive current samples (while the noise should vary them) are a
-#: stuck sensor; all of them are rejected.
+#: stuck sensor; all of them are rejected (blocks close this many samples late for it).
 STUCK_RUN_SAMPLES = 20
 
 
@@ -75,8 +75,9 @@ class Block:
     direction: +1 or -1 when every sample moves that way faster than the standstill speed,
     else 0 (standstill or reversing). current_residual_var_a2: variance of the current about
     its straight-line trend in the block (a step inside the block, e.g. the onset of a jam,
-    makes it large; the measurement noise uses it). after_gap, time_reset: the block starts a
-    new time line.
+    makes it large; the measurement noise uses it). silence_before_s: time from the previous
+    block's last accepted sample to this block's first (a hole in the data: dropouts or
+    rejected samples). after_gap, time_reset: the block starts a new time line.
     """
 
     stamp_s: float
@@ -89,6 +90,7 @@ class Block:
     carrier_sin: float
     direction: int
     current_residual_var_a2: float = 0.0
+    silence_before_s: float = 0.0
     after_gap: bool = False
     time_reset: bool = False
 
@@ -112,6 +114,7 @@ def merge_blocks(blocks: list[Block]) -> Block:
         carrier_sin=mean("carrier_sin"),
         direction=directions.pop() if len(directions) == 1 else 0,
         current_residual_var_a2=mean("current_residual_var_a2"),
+        silence_before_s=blocks[0].silence_before_s,
         after_gap=blocks[0].after_gap,
         time_reset=blocks[0].time_reset,
     )
@@ -142,6 +145,7 @@ class SampleBlocker:
         self._pending = _empty()
         self._anchor: float | None = None
         self._last_block_stamp: float | None = None
+        self._last_sample_stamp: float | None = None
         self._time_reset = False
         self._previous_current = math.nan  # last sample before the pending ones
         self._stuck_run = 0  # length of the identical-current run ending there
@@ -223,26 +227,38 @@ class SampleBlocker:
         return keep, resets
 
     # --- checks on complete blocks ------------------------------------------------------
-    def _spikes_and_stuck(self, current: FloatArray, following: float) -> BoolArray:
-        """Rejection mask of ``current`` (consecutive accepted samples; ``following`` is the
-        next sample, NaN if none): isolated spikes, and stuck runs from their
-        STUCK_RUN_SAMPLES-th identical sample on."""
-        x = np.r_[self._previous_current, current, following]
+    def _spikes_and_stuck(self, current: FloatArray, processed: int, final: bool) -> BoolArray:
+        """Rejection mask of the first ``processed`` of the pending ``current`` samples.
+
+        Spikes: isolated samples far from both neighbours, which agree with each other (the
+        context at either end is the neighbouring sample, or NaN: never a spike). Stuck: every
+        sample of a run of at least STUCK_RUN_SAMPLES identical values. Blocks are closed
+        only STUCK_RUN_SAMPLES samples before the end of what is pending (unless ``final``),
+        so any run that reaches into the unprocessed tail is already long enough to be judged,
+        and a whole stuck run is rejected, its first samples included.
+        """
+        x = np.r_[self._previous_current, current, math.nan]
         before, here, after = x[:-2], x[1:-1], x[2:]
-        with np.errstate(invalid="ignore"):  # NaN context at the ends: never a spike
+        with np.errstate(invalid="ignore"):
             spikes = (
                 (np.abs(here - before) > self._spike_a)
                 & (np.abs(here - after) > self._spike_a)
                 & (np.abs(after - before) < 0.5 * self._spike_a)
             )
-        same = here == before
-        run_ids = np.cumsum(~same)
-        first = np.flatnonzero(~same)
-        position = np.arange(len(here)) - np.r_[0, first][run_ids]
-        position = np.where(run_ids == 0, position + self._stuck_run, position)
-        stuck = position >= STUCK_RUN_SAMPLES - 1
-        self._stuck_run = int(position[-1]) + 1 if len(here) else self._stuck_run
-        self._previous_current = float(current[-1]) if len(current) else self._previous_current
+        run_ids = np.cumsum(here != before)  # run 0 continues the run before the pending ones
+        lengths = np.bincount(run_ids)
+        lengths[0] += self._stuck_run
+        open_ended = run_ids == run_ids[-1]
+        stuck = lengths[run_ids] >= STUCK_RUN_SAMPLES
+        if not final:  # the last run may go on: judged once it is long enough
+            stuck &= ~open_ended | (lengths[run_ids[-1]] >= STUCK_RUN_SAMPLES)
+        if processed:
+            last = run_ids[processed - 1]
+            self._stuck_run = int(np.count_nonzero(run_ids[:processed] == last)) + (
+                self._stuck_run if last == 0 else 0
+            )
+            self._previous_current = float(current[processed - 1])
+        spikes, stuck = spikes[:processed], stuck[:processed]
         self._count(RejectReason.SPIKE, spikes)
         self._count(RejectReason.STUCK, stuck & ~spikes)
         return np.asarray(spikes | stuck)
@@ -264,15 +280,17 @@ class SampleBlocker:
         cells = np.floor((t - anchors) / period).astype(np.int64)
         new_cell = np.r_[True, (cells[1:] != cells[:-1]) | (line[1:] != line[:-1])]
         starts = np.flatnonzero(new_cell)
-        complete = len(starts) if final else len(starts) - 1
-        if complete == 0:
+        if final:
+            complete = len(starts)
+        else:  # close cells that end STUCK_RUN_SAMPLES before the pending end (see above)
+            complete = int(np.searchsorted(starts, len(t) - STUCK_RUN_SAMPLES, side="right")) - 1
+        if complete <= 0:
             self._pending = pending
             return []
         end = int(starts[complete]) if complete < len(starts) else len(t)
         self._anchor = float(anchors[end - 1])
-        following = float(pending.current_a[end]) if end < len(t) else math.nan
         run = pending[:end]
-        rejected = self._spikes_and_stuck(run.current_a, following)
+        rejected = self._spikes_and_stuck(pending.current_a, end, final)
         self.counters.accepted += end - int(np.count_nonzero(rejected))
         self._pending = pending[end:]
         keep = ~rejected
@@ -317,6 +335,8 @@ class SampleBlocker:
         new_line = np.add.reduceat(gap_before.astype(np.int64), starts) > 0
         self.counters.gaps += int(np.count_nonzero(new_line))
         period = self._params.filter.block_duration_s
+        first_stamps = run.stamp_s[starts]
+        last_stamps = run.stamp_s[last]
         blocks = []
         for b in range(len(starts)):
             previous = self._last_block_stamp
@@ -324,6 +344,9 @@ class SampleBlocker:
             duration = period
             if previous is not None and not reset:
                 duration = float(stamps[b]) - previous
+            silence = 0.0
+            if self._last_sample_stamp is not None and not reset:
+                silence = float(first_stamps[b]) - self._last_sample_stamp
             blocks.append(
                 Block(
                     stamp_s=float(stamps[b]),
@@ -336,11 +359,13 @@ class SampleBlocker:
                     carrier_sin=float(sin_mean[b]),
                     direction=int(direction[b]),
                     current_residual_var_a2=float(residual_var[b]),
+                    silence_before_s=silence,
                     after_gap=bool(new_line[b]),
                     time_reset=reset,
                 )
             )
             self._last_block_stamp = float(stamps[b])
+            self._last_sample_stamp = float(last_stamps[b])
             self._time_reset = False
         return blocks
 

@@ -108,9 +108,23 @@ class TorqueModel:
             else:
                 self._models[case] = DirectPhysics(preset, actuator.misalignment, ratio, case)
 
-    def load_torque_arm_m(self) -> float:
-        """L / 2 pi: screw torque per newton of axial load."""
-        return self._load_arm_m
+    def ripple_scale(self, load_n: float) -> tuple[float, float]:
+        """S(F) = |F| L/2pi / sqrt(1 + (F / knee)^2) and dS/dF (see RIPPLE_KNEE_FRACTION)."""
+        root = math.sqrt(1.0 + (load_n / self._ripple_knee_n) ** 2)
+        return (
+            abs(load_n) * self._load_arm_m / root,
+            math.copysign(self._load_arm_m, load_n) / root**3,
+        )
+
+    def ripple_drift(self, x: FloatArray, dt: float) -> float:
+        """Relative change of S over dt at the state's load rate, |dS/S|, at most 1.
+
+        The physical ripple follows the radial load, not S; while the load ramps, S changes
+        and the relative ripple c, s must change the other way (hypotheses.py widens them).
+        """
+        scale, slope = self.ripple_scale(float(x[LOAD]))
+        change = abs(slope * float(x[LOAD_RATE]) * dt)
+        return min(1.0, change / scale) if scale > 0.0 else 1.0
 
     def predict(self, x: FloatArray, block: Block, jammed: int) -> Prediction:
         """The measurement of ``block`` under ``jammed`` rollers at state ``x``."""
@@ -136,9 +150,7 @@ class TorqueModel:
                 relative = float(
                     x[RIPPLE_COS] * block.carrier_cos + x[RIPPLE_SIN] * block.carrier_sin
                 )
-                root = math.sqrt(1.0 + (load / self._ripple_knee_n) ** 2)
-                scale = abs(load) * self._load_arm_m / root
-                d_scale = math.copysign(self._load_arm_m, load) / root**3
+                scale, d_scale = self.ripple_scale(load)
                 screw_torque += direction * scale * relative
                 d_screw_d_load += direction * d_scale * relative
                 jacobian[RIPPLE_COS] = direction * scale * block.carrier_cos

@@ -15,6 +15,11 @@ precision loss: during a load ramp of 100 kN/s a 10 ms offset would be a 1 kN er
   most likely count above the true one;
 - precision loss: the final error (absolute and relative to the final truth), and the
   fraction of estimates whose truth lies within +-2 std.
+
+Estimates are stamped with the sensor's clock. When that clock jumps (an estimate with event
+TIME_RESET), the estimates after it are put back on the truth's time line by the offset that
+best matches their screw speed to the truth's (searched within +-MAX_CLOCK_OFFSET_S); the
+offsets found are reported.
 """
 
 from __future__ import annotations
@@ -26,13 +31,15 @@ import numpy as np
 from numpy.typing import NDArray
 from scipy.stats import chi2
 
-from prsm_health.estimation.estimate import HealthState
+from prsm_health.estimation.estimate import EstimateEvent, HealthState
 from prsm_health.signals import TruthSamples
 
 FloatArray = NDArray[np.float64]
 
 #: The screw counts as moving above this fraction of the preset's largest speed.
 MOVING_FRACTION = 0.01
+#: Largest sensor-clock jump that the alignment after a TIME_RESET searches for [s].
+MAX_CLOCK_OFFSET_S = 10.0
 
 
 @dataclass(frozen=True)
@@ -63,6 +70,7 @@ class Metrics:
     precision_loss_truth_final_m: float
     precision_loss_error_percent: float
     precision_loss_coverage_2sigma: float
+    clock_offsets_s: tuple[float, ...] = ()
 
     def to_dict(self) -> dict[str, object]:
         """JSON-able form (``--metrics-json``)."""
@@ -87,7 +95,7 @@ def score(
     """Score ``states`` against ``truth`` (see the module docstring)."""
     if not states or len(truth) == 0:
         raise ValueError("score: no estimates or no truth to compare")
-    stamps = np.array([s.stamp_s for s in states])
+    stamps, offsets = _on_truth_time(states, truth)
     at = _truth_at(truth, stamps)
 
     def interpolated(values: FloatArray) -> FloatArray:
@@ -132,7 +140,31 @@ def score(
             100.0 * (float(loss[-1]) - final_truth) / final_truth if final_truth > 0 else math.nan
         ),
         precision_loss_coverage_2sigma=float(np.mean(covered)),
+        clock_offsets_s=offsets,
     )
+
+
+def _on_truth_time(
+    states: list[HealthState], truth: TruthSamples
+) -> tuple[FloatArray, tuple[float, ...]]:
+    """Estimate stamps on the truth's clock, and the offsets applied after each time reset."""
+    stamps = np.array([s.stamp_s for s in states])
+    speed = np.array([s.screw_speed_rad_s for s in states])
+    resets = [i for i, s in enumerate(states) if s.event == EstimateEvent.TIME_RESET]
+    offsets = []
+    for begin, end in zip(resets, [*resets[1:], len(states)], strict=False):
+        segment = slice(begin, end)
+        best = 0.0
+        for step in (1e-2, 1e-3):
+            span = MAX_CLOCK_OFFSET_S if step == 1e-2 else 2e-2
+            candidates = best + np.arange(-span, span + step / 2, step)
+            shifted = stamps[segment][None, :] + candidates[:, None]
+            truth_speed = np.interp(shifted, truth.stamp_s, truth.screw_speed_rad_s)
+            errors = np.mean((truth_speed - speed[segment][None, :]) ** 2, axis=1)
+            best = float(candidates[int(np.argmin(errors))])
+        stamps[segment] += best
+        offsets.append(best)
+    return stamps, tuple(offsets)
 
 
 def _nees_test(stamps: FloatArray, nees: FloatArray) -> tuple[float, tuple[float, float], bool]:

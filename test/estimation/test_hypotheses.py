@@ -85,7 +85,10 @@ def test_random_blocks_keep_covariances_spd_and_probabilities_normalised(kind: s
         for kf in bank.filters.values():
             assert np.all(np.isfinite(kf.x))
             np.testing.assert_array_equal(kf.P, kf.P.T)
-            assert np.linalg.eigvalsh(kf.P).min() > 0.0
+            scale = np.sqrt(np.diagonal(kf.P))
+            correlation = kf.P / np.outer(scale, scale)  # unit-free: states are N, N/s^2, ...
+            assert np.linalg.eigvalsh(correlation).min() > 0.0
+            np.linalg.cholesky(kf.P)
 
 
 def test_safe_sqrt_repairs_a_matrix_that_lost_definiteness() -> None:
@@ -94,6 +97,10 @@ def test_safe_sqrt_repairs_a_matrix_that_lost_definiteness() -> None:
     assert np.all(np.isfinite(root))
     assert root.T @ root == pytest.approx(broken, abs=1e-9)
     assert np.linalg.eigvalsh(repair_covariance(broken)).min() > 0.0
+    units = np.diag([1e5, 1e-3]) @ np.array([[1.0, 1.0], [1.0, 1.0]]) @ np.diag([1e5, 1e-3])
+    repaired = repair_covariance(units)  # singular, with a condition number of 1e16 in SI
+    np.linalg.cholesky(repaired)
+    assert np.diagonal(repaired) == pytest.approx(np.diagonal(units))
 
 
 def test_pruning_keeps_the_likely_counts_and_the_next_one() -> None:

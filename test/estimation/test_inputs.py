@@ -57,6 +57,7 @@ def with_values(samples: MotorSamples, **changes: tuple[int, float]) -> MotorSam
 @pytest.mark.parametrize("size", [1, 7, 333])
 def test_blocks_do_not_depend_on_the_chunking(size: int) -> None:
     samples = with_values(run(), current_a=(500, 40.0), speed_rad_s=(900, math.nan))
+    samples.current_a[1200 : 1200 + 3 * STUCK_RUN_SAMPLES] = 3.3
     reference, ref_blocker = feed_in_chunks(samples, len(samples))
     blocks, blocker = feed_in_chunks(samples, size)
     assert blocks == reference
@@ -110,13 +111,15 @@ def test_a_step_in_the_current_is_not_a_spike() -> None:
     assert blocker.counters.rejected_total == 0
 
 
-def test_a_stuck_current_is_rejected_from_its_twentieth_sample() -> None:
+@pytest.mark.parametrize("size", [1, 9, 1000])
+def test_a_stuck_current_is_rejected_whole_and_a_shorter_run_is_not(size: int) -> None:
     samples = run(1.0)
     current = samples.current_a.copy()
     current[200:300] = 4.2
+    current[500 : 500 + STUCK_RUN_SAMPLES - 1] = 4.3  # one short of stuck
     stuck = MotorSamples(samples.stamp_s, current, samples.speed_rad_s, samples.position_rad)
-    _, blocker = feed_in_chunks(stuck, 9)
-    assert blocker.counters.rejected[RejectReason.STUCK] == 100 - (STUCK_RUN_SAMPLES - 1)
+    _, blocker = feed_in_chunks(stuck, size)
+    assert blocker.counters.rejected[RejectReason.STUCK] == 100
 
 
 def test_time_going_backwards_is_rejected_then_followed_as_a_new_time_line() -> None:
