@@ -20,6 +20,8 @@ from prsm_health_msgs.msg import HealthEstimate
 from prsm_health.outputs import DiagnosticStatusData
 
 NS_PER_S = 1_000_000_000
+#: Why a JointState gives no sample (counted as rejected by the node, by these names).
+JOINT_PROBLEMS = ("joint_missing", "joint_incomplete")
 
 
 def stamp_seconds(stamp: Any) -> float:
@@ -57,10 +59,10 @@ def joint_sample(msg: Any, joint: str, torque_constant_nm_per_a: float | None) -
     try:
         index = list(msg.name).index(joint)
     except ValueError:
-        return JointSample(problem="joint_missing")
+        return JointSample(problem=JOINT_PROBLEMS[0])
     arrays = (msg.effort, msg.velocity, msg.position)
     if any(len(values) <= index for values in arrays):
-        return JointSample(problem="joint_incomplete")
+        return JointSample(problem=JOINT_PROBLEMS[1])
     effort = float(msg.effort[index])
     current = effort if torque_constant_nm_per_a is None else effort / torque_constant_nm_per_a
     return JointSample(current, float(msg.velocity[index]), float(msg.position[index]))

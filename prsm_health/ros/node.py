@@ -57,6 +57,7 @@ from prsm_health.outputs import (
     persistence_status,
 )
 from prsm_health.ros.messages import (
+    JOINT_PROBLEMS,
     diagnostic_array,
     health_estimate,
     joint_sample,
@@ -208,6 +209,8 @@ class HealthNode(LifecycleNode):
 
     def _configure(self, config: NodeConfig) -> None:
         self._reset_run_state()
+        if config.input_type == "joint_state":  # stable diagnostics keys from the start
+            self._node_rejects.update(dict.fromkeys(JOINT_PROBLEMS, 0))
         estimator = HealthEstimator(config.estimator)
         store = StateStore(config.state_file, config.hardware_id)
         outcome = store.restore(estimator)

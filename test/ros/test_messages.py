@@ -1,0 +1,56 @@
+"""Input rows from ROS messages, and the output messages (no DDS needed)."""
+
+from __future__ import annotations
+
+import math
+
+import pytest
+from builtin_interfaces.msg import Time
+from sensor_msgs.msg import JointState
+
+from prsm_health.outputs import DiagnosticStatusData, Level
+from prsm_health.ros.messages import (
+    JointSample,
+    diagnostic_array,
+    health_estimate,
+    joint_sample,
+    stamp_seconds,
+    time_msg,
+)
+
+
+def test_stamps() -> None:
+    assert stamp_seconds(Time(sec=12, nanosec=500_000_000)) == 12.5
+    assert math.isnan(stamp_seconds(Time(sec=0, nanosec=0xFFFFFFFF)))  # the bags' NaN marker
+    assert math.isnan(stamp_seconds(Time(sec=5, nanosec=1_000_000_000)))
+    assert time_msg(12.5) == Time(sec=12, nanosec=500_000_000)
+    assert time_msg(1.9999999999) == Time(sec=2, nanosec=0)
+    assert time_msg(math.nan) == Time() == time_msg(-1.0)
+
+
+def test_joint_sample() -> None:
+    msg = JointState(
+        name=["wheel", "prsm_motor"],
+        position=[0.0, 3.0],
+        velocity=[0.0, 150.0],
+        effort=[0.0, 1.2],
+    )
+    assert joint_sample(msg, "prsm_motor", None) == JointSample(1.2, 150.0, 3.0)
+    torque = joint_sample(msg, "prsm_motor", 0.6)
+    assert torque.current_a == pytest.approx(2.0)
+    assert joint_sample(msg, "other", None).problem == "joint_missing"
+    msg.velocity = [0.0]
+    assert joint_sample(msg, "prsm_motor", None).problem == "joint_incomplete"
+
+
+def test_output_messages() -> None:
+    fields = {"axial_load_n": 100.0, "jammed_rollers_probability": [0.5, 0.5], "event": 1}
+    msg = health_estimate(fields, 7.25, "prsm_motor")
+    assert (msg.axial_load_n, msg.event, msg.header.frame_id) == (100.0, 1, "prsm_motor")
+    assert (msg.header.stamp.sec, msg.header.stamp.nanosec) == (7, 250_000_000)
+    status = DiagnosticStatusData("prsm_health: fatigue", Level.WARN, "m", "left", [("a", "1")])
+    array = diagnostic_array([status], 3.0)
+    assert array.header.stamp.sec == 3
+    assert array.status[0].level == bytes([1])
+    assert (array.status[0].name, array.status[0].hardware_id) == ("prsm_health: fatigue", "left")
+    assert [(kv.key, kv.value) for kv in array.status[0].values] == [("a", "1")]
