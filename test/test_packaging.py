@@ -119,7 +119,9 @@ def test_colcon_build_installs_both_packages(tmp_path: Path) -> None:
         "import prsm_health, prsm_health_msgs.msg;"
         "from rclpy.serialization import serialize_message;"
         "serialize_message(prsm_health_msgs.msg.MotorState());"
-        "print(prsm_health.__file__); print(prsm_health_msgs.msg.__file__)"
+        "print(prsm_health.__file__); print(prsm_health_msgs.msg.__file__);"
+        "from prsm_health.ros.parameters import default_params_file;"
+        "print(default_params_file())"
     )
     # Not from the repo root: `python -c` puts the working directory first on sys.path.
     out = run(
@@ -135,6 +137,9 @@ def test_colcon_build_installs_both_packages(tmp_path: Path) -> None:
     assert (share / "ament_index/resource_index/packages/prsm_health").is_file()
     assert (share / "prsm_health/package.xml").is_file()
     assert (install / "prsm_health/lib/prsm_health/prsm-health").is_file()
+    assert (install / "prsm_health/lib/prsm_health/prsm-health-node").is_file()
+    assert (share / "prsm_health/launch/prsm_health.launch.py").is_file()
+    assert files[2] == share / "prsm_health/config/default.yaml"  # found via the ament index
     shipped = {p.name for p in files[0].parent.rglob("*.yaml")}
     sources = {p.name for p in (REPO / "prsm_health").rglob("*.yaml")}
     assert shipped == sources
