@@ -7,6 +7,7 @@ from typing import Any
 
 import pytest
 
+from prsm_health.outputs import PERSISTENCE, STATUS_NAMES
 from prsm_health.ros.parameters import (
     PARAMETERS,
     SPECS,
@@ -80,3 +81,12 @@ def test_ranges_accept_integers_for_doubles_but_not_bools() -> None:
     assert SPECS["health_rate_hz"].problem(True) is not None
     assert SPECS["input_queue_depth"].problem(0) is not None
     assert SPECS["autostart"].read_only
+
+
+def test_docs_list_every_parameter_and_status() -> None:
+    docs = (REPO / "docs" / "ros.md").read_text()
+    ros_types = {bool: "bool", int: "int", float: "double", str: "string"}
+    for spec in PARAMETERS:
+        assert f"| `{spec.name}` | {ros_types[type(spec.default)]} |" in docs
+    for name in (*STATUS_NAMES, PERSISTENCE):
+        assert f"| `{name}` |" in docs
