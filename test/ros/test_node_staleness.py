@@ -1,5 +1,6 @@
 """Inputs stop: every estimator status goes STALE within the timeout; inputs resume: it
-recovers (real processes, the node's clock is the system clock here)."""
+recovers (real processes, the node's clock is the system clock here). The same node shows
+~/health throttled to health_rate_hz."""
 
 from __future__ import annotations
 
@@ -14,6 +15,7 @@ from test.ros.harness import Listener, NodeProcess, play
 
 STALE_TIMEOUT_S = 0.5
 DIAGNOSTICS_RATE_HZ = 10.0
+HEALTH_RATE_HZ = 5.0
 HARDWARE_ID = "stale_test"
 
 
@@ -39,6 +41,7 @@ def test_stale_then_recovered(ros: None, tmp_path: Path) -> None:
             hardware_id=HARDWARE_ID,
             state_file=str(tmp_path / "state.json"),
             diagnostics_rate_hz=DIAGNOSTICS_RATE_HZ,
+            health_rate_hz=HEALTH_RATE_HZ,
         ) as node:
             node.wait_log("configured")
 
@@ -60,6 +63,10 @@ def test_stale_then_recovered(ros: None, tmp_path: Path) -> None:
             before = len(series())
             play(first, listener=listener)
             listener.wait_for(lambda: stale(series()[-1][1]), 5.0, "STALE after the inputs")
+            # ~/health at HEALTH_RATE_HZ (2 s of bag: 10), not every estimate (50 blocks).
+            stamps = [h["stamp"] for h in listener.health]
+            assert 8 <= len(stamps) <= 12, stamps
+            assert stamps == sorted(set(stamps))  # each estimate once, the newest at each tick
             during = series()[before:]
             last_fresh = max(i for i, (_, st) in enumerate(during) if not stale(st))
             (fresh_at, fresh), (stale_at, first_stale) = during[last_fresh : last_fresh + 2]
