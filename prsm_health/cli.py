@@ -5,6 +5,7 @@ Subcommands:
   model-demo  the model for every bundled preset at its paper's largest load
   play, monitor, demo   the ROS tools (prsm_health/ros/tools.py)
   simulate    run a scene of the truth simulator into a rosbag2 MCAP bag
+  replay      run the estimator over a bag: summary, --out MCAP, --report, --metrics-json
 Units at this edge are the engineers' ones (N, rpm, arcmin, mm, um/h); inside all is SI.
 """
 
@@ -26,6 +27,7 @@ from prsm_health.physics.geometry import Misalignment
 from prsm_health.physics.load_distribution import LoadingCase
 from prsm_health.physics.model import ModelResult, OperatingPoint, evaluate
 from prsm_health.physics.presets import PRESET_NAMES, load_preset
+from prsm_health.replay_command import add_replay_command
 from prsm_health.ros.tools import add_ros_commands
 from prsm_health.scenes.recording import record
 from prsm_health.scenes.scene import load_scene, scene_names
@@ -101,6 +103,7 @@ def _build_parser() -> _Parser:
 
     commands.add_parser("model-demo", help="model every bundled preset at its largest paper load")
     add_ros_commands(commands)
+    add_replay_command(commands)
     return parser
 
 
@@ -224,6 +227,8 @@ def main(argv: Sequence[str] | None = None) -> int:
     if "ros_command" in args:
         return int(args.ros_command(args))
     try:
+        if "handler" in args:
+            return int(args.handler(args))
         if args.command == "model":
             return _run_model(args)
         if args.command == "simulate":

@@ -59,34 +59,22 @@ class DegradationIntegrator:
     def add(
         self,
         duration_s: float,
-        probabilities: dict[int, float],
-        predictions: dict[int, Prediction],
-        load_std_n: dict[int, float],
+        weights: list[float],
+        predictions: list[Prediction],
+        load_std_n: list[float],
     ) -> None:
-        """Integrate one block of ``duration_s`` under the hypotheses' predictions."""
-        rate = sum(
-            mu * predictions[k].precision_loss_rate_m_per_s for k, mu in probabilities.items()
-        )
+        """Integrate one block of ``duration_s`` under the hypotheses' predictions (the
+        lists are aligned: probability, prediction and load std of each hypothesis)."""
+        parts = list(zip(weights, predictions, load_std_n, strict=True))
+        rate = sum(mu * p.precision_loss_rate_m_per_s for mu, p, _ in parts)
         spread = math.sqrt(
-            sum(
-                mu * (predictions[k].precision_loss_rate_m_per_s - rate) ** 2
-                for k, mu in probabilities.items()
-            )
+            sum(mu * (p.precision_loss_rate_m_per_s - rate) ** 2 for mu, p, _ in parts)
         )
-        load_rate_error = sum(
-            mu * abs(predictions[k].precision_loss_rate_slope) * load_std_n[k]
-            for k, mu in probabilities.items()
-        )
-        damage_rate = sum(mu * predictions[k].fatigue_rate_per_s for k, mu in probabilities.items())
+        load_rate_error = sum(mu * abs(p.precision_loss_rate_slope) * std for mu, p, std in parts)
+        damage_rate = sum(mu * p.fatigue_rate_per_s for mu, p, _ in parts)
         damage_error = sum(
-            mu * abs(predictions[k].fatigue_rate_slope) * load_std_n[k]
-            for k, mu in probabilities.items()
-        ) + math.sqrt(
-            sum(
-                mu * (predictions[k].fatigue_rate_per_s - damage_rate) ** 2
-                for k, mu in probabilities.items()
-            )
-        )
+            mu * abs(p.fatigue_rate_slope) * std for mu, p, std in parts
+        ) + math.sqrt(sum(mu * (p.fatigue_rate_per_s - damage_rate) ** 2 for mu, p, _ in parts))
         s = self.state
         s.rate_m_per_s = rate
         s.precision_loss_m += rate * duration_s

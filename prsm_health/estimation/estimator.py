@@ -43,7 +43,7 @@ HOLE_BLOCKS = 3.0
 REACQUIRE_S = 0.25
 
 #: Version of the :meth:`HealthEstimator.snapshot` layout.
-SNAPSHOT_FORMAT = 1
+SNAPSHOT_FORMAT = 2
 
 
 class SnapshotError(ValueError):
@@ -83,6 +83,8 @@ class HealthEstimator:
         self._nis: deque[tuple[float, float]] = deque()
         self._gated_run = 0
         self._blind_until_s = -math.inf
+        self._direction = 0
+        self._direction_since_s = -math.inf
 
     @property
     def counters(self) -> InputCounters:
@@ -101,14 +103,16 @@ class HealthEstimator:
         return {
             "format": SNAPSHOT_FORMAT,
             "actuator": actuator_fingerprint(self.params),
-            "hypotheses": {
-                str(k): {
-                    "log_probability": bank.log_prob[k],
-                    "x": kf.x.tolist(),
-                    "P": kf.P.tolist(),
+            "hypotheses": [
+                {
+                    "count": h.count,
+                    "fresh": h.fresh,
+                    "log_probability": h.log_prob,
+                    "x": h.filter.x.tolist(),
+                    "P": h.filter.P.tolist(),
                 }
-                for k, kf in bank.filters.items()
-            },
+                for h in bank.hypotheses
+            ],
             "degradation": self._degradation.state.to_dict(),
             "samples_accepted": self.counters.accepted,
             "samples_rejected": self.counters.rejected,
@@ -124,10 +128,10 @@ class HealthEstimator:
                     "the state belongs to another actuator (preset, geometry or drive train "
                     "differ): refusing to resume from it"
                 )
-            hypotheses = {int(k): v for k, v in snapshot["hypotheses"].items()}
             dim = self._model.dim
-            states = {}
-            for k, entry in hypotheses.items():
+            states = []
+            for entry in snapshot["hypotheses"]:
+                k = int(entry["count"])
                 x = np.asarray(entry["x"], dtype=np.float64)
                 p = np.asarray(entry["P"], dtype=np.float64)
                 log_probability = float(entry["log_probability"])
@@ -141,11 +145,11 @@ class HealthEstimator:
                 )
                 if not valid:
                     raise SnapshotError(f"hypothesis {k} is malformed")
-                states[k] = (x, p, log_probability)
+                states.append((k, bool(entry["fresh"]), x, p, log_probability))
             degradation = Degradation(**{k: float(v) for k, v in snapshot["degradation"].items()})
             accepted = int(snapshot["samples_accepted"])
             rejected = [int(v) for v in snapshot["samples_rejected"]]
-        except (KeyError, TypeError, ValueError) as exc:
+        except (KeyError, TypeError, ValueError, AttributeError) as exc:
             raise SnapshotError(f"malformed state: {exc!r}") from exc
         if not states or not all(math.isfinite(v) for v in degradation.to_dict().values()):
             raise SnapshotError("no hypotheses, or non-finite degradation values")
@@ -195,22 +199,39 @@ class HealthEstimator:
             self._bank.reinitialise_load(keep_load=True)
         if block.time_reset or hole:
             self._blind_until_s = block.stamp_s + REACQUIRE_S
-        step = self._bank.step(block, evidence=block.stamp_s > self._blind_until_s)
+        step = self._bank.step(
+            block, jerk_psd=self._jerk_psd(block), evidence=block.stamp_s > self._blind_until_s
+        )
         if self._diverged(block, step):
             self._bank.reinitialise_load()
             self._nis.clear()
             self._gated_run = 0
             event = EstimateEvent.DIVERGENCE_RECOVERED
-        probabilities = {k: math.exp(v) for k, v in self._bank.log_prob.items()}
-        filters = self._bank.filters
-        load_std = {k: math.sqrt(filters[k].P[LOAD, LOAD]) for k in filters}
+        hypotheses = self._bank.hypotheses
+        weights = [math.exp(h.log_prob) for h in hypotheses]
         moving = block.direction != 0
         if moving or not self.params.fidelity.skip_standstill:
             duration = min(block.duration_s, self.params.filter.max_gap_s)
-            self._degradation.add(duration, probabilities, step.predictions, load_std)
+            load_std = [math.sqrt(h.filter.P[LOAD, LOAD]) for h in hypotheses]
+            self._degradation.add(duration, weights, step.predictions, load_std)
         else:
             self._degradation.stop()
-        return self._state(block, step, probabilities, event)
+        return self._state(block, step, weights, event)
+
+    def _jerk_psd(self, block: Block) -> float:
+        """The load model's jerk density: high while a stroke starts (the traction load builds
+        up as the motion starts), low in steady motion, where a load that follows the
+        carrier-frequency ripple would otherwise hide a jammed roller."""
+        model = self.params.model
+        if block.direction != self._direction:
+            self._direction = block.direction
+            self._direction_since_s = block.stamp_s
+        if (
+            block.direction == 0
+            or block.stamp_s - self._direction_since_s < model.load_transition_s
+        ):
+            return model.load_jerk_psd_transition_n2_per_s5
+        return model.load_jerk_psd_n2_per_s5
 
     def _diverged(self, block: Block, step: StepResult) -> bool:
         """Gated for too long, or the mean NIS of the likeliest hypothesis too large."""
@@ -219,9 +240,8 @@ class HealthEstimator:
             return True
         if step.gated:
             return False
-        best = max(self._bank.log_prob, key=self._bank.log_prob.__getitem__)
-        if best in step.nis:
-            self._nis.append((block.stamp_s, step.nis[best]))
+        best = self._bank.hypotheses.index(self._bank.most_likely())
+        self._nis.append((block.stamp_s, step.nis[best]))
         window = self.params.filter.divergence_window_s
         while self._nis and self._nis[0][0] < block.stamp_s - window:
             self._nis.popleft()
@@ -236,17 +256,18 @@ class HealthEstimator:
         self,
         block: Block,
         step: StepResult,
-        probabilities: dict[int, float],
+        weights: list[float],
         event: EstimateEvent,
     ) -> HealthState:
-        filters = self._bank.filters
-        load = sum(mu * float(filters[k].x[LOAD]) for k, mu in probabilities.items())
+        hypotheses = self._bank.hypotheses
+        loads = [float(h.filter.x[LOAD]) for h in hypotheses]
+        load = sum(w * f for w, f in zip(weights, loads, strict=True))
         load_var = sum(
-            mu * (float(filters[k].P[LOAD, LOAD]) + (float(filters[k].x[LOAD]) - load) ** 2)
-            for k, mu in probabilities.items()
+            w * (float(h.filter.P[LOAD, LOAD]) + (f - load) ** 2)
+            for w, f, h in zip(weights, loads, hypotheses, strict=True)
         )
         friction = sum(
-            mu * step.predictions[k].friction_torque_nm for k, mu in probabilities.items()
+            w * p.friction_torque_nm for w, p in zip(weights, step.predictions, strict=True)
         )
         geometry = self.params.actuator.preset.geometry
         counters = self._blocker.counters

@@ -1,21 +1,33 @@
-"""Jam-count hypotheses: an interacting multiple model (IMM) over filterpy Kalman filters.
+"""Jam-count hypotheses: a multiple-model filter over filterpy Kalman filters.
 
 Hypothesis k says "k rollers are jammed"; each has its own filter over the continuous state
-(load, load rate, ripple) and a probability. One step per block, as in the IMM of Blom and
-Bar-Shalom (the equations of filterpy's ``IMMEstimator``):
+(load and its derivatives, ripple) and a probability. Jams only ever increase, with a prior
+probability p = 1 - exp(-rate dt) per block. One step per block:
 
-1. mixing: c_j = sum_i pi_ij mu_i, x0_j = sum_i pi_ij mu_i x_i / c_j, P0_j likewise plus the
-   spread of the means; jams only ever increase, so pi is upper bidiagonal over one block:
-   pi_{k,k} = 1 - p, pi_{k,k+1} = p with p = 1 - exp(-rate dt). A jump k -> k + 1 adds a
-   ripple of unknown phase: its covariance (ripple_prior_std^2 on c and s) is added;
+1. merging (the IMM mixing of Blom and Bar-Shalom, filterpy's ``IMMEstimator``): for each
+   count k, the established hypothesis k (probability times 1 - p: no new jam) and the
+   *fresh* hypothesis k of the previous block (a jam that started then, and has been tested
+   by that block's likelihood) become one Gaussian by moment matching; then from every
+   established k a fresh hypothesis k + 1 is born: the state of k (the load does not change
+   when a roller seizes) plus the covariance of a new ripple of unknown phase
+   (ripple_prior_std^2 on c and s), with probability times p;
 2. each filter predicts and updates (filterpy ``ExtendedKalmanFilter`` or
-   ``UnscentedKalmanFilter``; Joseph-form covariance update in the EKF);
-3. mu_j proportional to c_j times the measurement likelihood N(y; 0, S_j). At standstill the
-   likelihoods are not used: the stiction band carries no evidence about jams.
+   ``UnscentedKalmanFilter``; Joseph-form covariance update in the EKF). A fresh hypothesis
+   predicts the block in which its jam starts at a uniformly random instant
+   (:meth:`JamHypotheses._measurement`);
+3. probabilities times the measurement likelihood N(y; 0, S). At standstill the likelihoods
+   are not used: the stiction band carries no evidence about jams.
 
-What filterpy's ``IMMEstimator`` does not do and this does: pruning (a hypothesis below
-``filter.min_hypothesis_probability`` is dropped, and only the next count above the plausible
-ones is kept to catch a new jam), gating (a block that no hypothesis explains is not used),
+Why fresh hypotheses are merged one block late: merged at once (plain IMM), the state born
+from count k would be averaged into hypothesis k + 1 every block with about the weight of
+k + 1 itself while k + 1 is still improbable. When a jam happened unseen (at standstill), the
+load of count k is biased by the jam's torque and would keep pulling k + 1 off, so that k + 1
+could never gather the ripple's evidence. Tested by one block's likelihood first, a fresh
+hypothesis that did not happen carries almost no weight into the merge.
+
+What filterpy's ``IMMEstimator`` does not do and this does: the fresh hypotheses above,
+pruning (a count below ``filter.min_hypothesis_probability`` is dropped: jams never
+decrease, so it cannot come back), gating (a block that no hypothesis explains is not used),
 and numerical repair of the covariances (symmetrised, variance floors, positive definite).
 """
 
@@ -86,22 +98,33 @@ def repair_covariance(matrix: FloatArray, floor: FloatArray | None = None) -> Fl
     return np.asarray(repaired * np.outer(scale, scale), dtype=np.float64)
 
 
+@dataclass
+class Hypothesis:
+    """One hypothesis: the jam count, its filter, its log probability, whether it is fresh
+    (the jam started in the current block)."""
+
+    count: int
+    filter: Filter
+    log_prob: float
+    fresh: bool = False
+
+
 @dataclass(frozen=True)
 class StepResult:
-    """What one block did to the hypotheses.
+    """What one block did to the hypotheses (lists in the order of ``hypotheses`` after it).
 
-    predictions: per active hypothesis, the model's prediction at its updated state.
-    nis: normalised innovation squared per active hypothesis (before the update).
-    gated: no hypothesis explained the block; it was not used.
+    predictions: the model's prediction at each hypothesis' updated state. nis: normalised
+    innovation squared of each (before the update). gated: no hypothesis explained the
+    block; it was not used.
     """
 
-    predictions: dict[int, Prediction]
-    nis: dict[int, float]
+    predictions: list[Prediction]
+    nis: list[float]
     gated: bool
 
 
 class JamHypotheses:
-    """The IMM bank (see the module docstring)."""
+    """The multiple-model bank (see the module docstring)."""
 
     def __init__(self, params: EstimatorParams, model: TorqueModel) -> None:
         self._params = params
@@ -124,13 +147,15 @@ class JamHypotheses:
         if self._ripple:
             self._jump_cov[RIPPLE_COS:, RIPPLE_COS:] = np.eye(2) * params.model.ripple_prior_std**2
         start = params.model.initial_jammed_rollers
-        self.filters: dict[int, Filter] = {}
-        self.log_prob: dict[int, float] = {}
-        self._onset_weight: dict[int, float] = {}
         counts = [start] if self._prune else list(range(self.n_rollers + 1))
-        for k in counts:
-            self.filters[k] = self._new_filter(np.zeros(self._dim), np.diag(initial))
-            self.log_prob[k] = 0.0 if k == start else -math.inf
+        self.hypotheses = [
+            Hypothesis(
+                k,
+                self._new_filter(np.zeros(self._dim), np.diag(initial)),
+                0.0 if k == start else -math.inf,
+            )
+            for k in counts
+        ]
 
     # --- filters ------------------------------------------------------------------------
     def _new_filter(self, x: FloatArray, p: FloatArray) -> Filter:
@@ -147,7 +172,9 @@ class JamHypotheses:
         kf.P = p.copy()
         return kf
 
-    def _process(self, jammed: int, dt: float, x: FloatArray) -> tuple[FloatArray, FloatArray]:
+    def _process(
+        self, jammed: int, dt: float, x: FloatArray, jerk_psd: float
+    ) -> tuple[FloatArray, FloatArray]:
         """Transition and process noise over dt from state x: the load as a white-jerk
         (constant acceleration) process; the ripple (only when jammed) as a random walk,
         widened by its prior size times the relative change of its load scale
@@ -155,7 +182,7 @@ class JamHypotheses:
         transition = np.eye(self._dim)
         transition[LOAD, LOAD_RATE] = transition[LOAD_RATE, LOAD_ACCELERATION] = dt
         transition[LOAD, LOAD_ACCELERATION] = dt**2 / 2.0
-        q = self._params.model.load_jerk_psd_n2_per_s5
+        q = jerk_psd
         noise = np.zeros((self._dim, self._dim))
         noise[:LOAD_STATES, :LOAD_STATES] = q * np.array(
             [
@@ -170,78 +197,82 @@ class JamHypotheses:
             noise[RIPPLE_COS:, RIPPLE_COS:] = np.eye(2) * (walk**2 * dt + drift**2)
         return transition, noise
 
-    # --- the IMM step -------------------------------------------------------------------
+    # --- the step -----------------------------------------------------------------------
     def probabilities(self) -> FloatArray:
         """Probability of each jam count 0..N (zeros for pruned counts), summing to 1."""
         probs = np.zeros(self.n_rollers + 1)
-        for k, value in self.log_prob.items():
-            probs[k] = math.exp(value)
+        for h in self.hypotheses:
+            probs[h.count] += math.exp(h.log_prob)
         return np.asarray(probs / probs.sum(), dtype=np.float64)
 
-    def _mix(self, dt: float) -> None:
-        """IMM mixing over one block (step 1), activating the next jam count if pruned."""
+    def _merge(self, dt: float) -> None:
+        """Step 1 of the module docstring: merge each count, then give birth to fresh jams."""
+        if self._prune:
+            self._drop_unlikely()
         p_jump = -math.expm1(-self._rate_per_s * dt)
-        log_stay, log_jump = math.log1p(-p_jump), math.log(p_jump) if p_jump > 0 else -math.inf
-        targets = sorted(self.filters)
-        top = targets[-1]
-        if top < self.n_rollers and top + 1 not in self.filters:
-            targets.append(top + 1)
-        mixed: dict[int, tuple[FloatArray, FloatArray, float]] = {}
-        self._onset_weight = {}
-        for j in targets:
-            sources = []
-            if j in self.filters:
-                stay = self.log_prob[j] + (log_stay if j < self.n_rollers else 0.0)
-                sources.append((stay, self.filters[j], 0))
-            if j - 1 in self.filters:
-                sources.append((self.log_prob[j - 1] + log_jump, self.filters[j - 1], 1))
-            logs = np.array([s[0] for s in sources])
-            total = float(np.logaddexp.reduce(logs)) if len(logs) else -math.inf
-            if not math.isfinite(total):  # no probability flows here: keep the state
-                kf = self.filters.get(j) or sources[0][1]
-                mixed[j] = (kf.x.copy(), kf.P.copy(), -math.inf)
+        log_stay = math.log1p(-p_jump)
+        log_jump = math.log(p_jump) if p_jump > 0.0 else -math.inf
+        by_count: dict[int, list[Hypothesis]] = {}
+        for h in self.hypotheses:
+            by_count.setdefault(h.count, []).append(h)
+        established = []
+        for count in sorted(by_count):
+            stay = log_stay if count < self.n_rollers else 0.0
+            members = by_count[count]
+            logs = np.array([h.log_prob + stay for h in members])
+            total = float(np.logaddexp.reduce(logs))
+            if len(members) == 1 or not math.isfinite(total):
+                kept = members[0] if len(members) == 1 else max(members, key=lambda h: h.log_prob)
+                kept.log_prob, kept.fresh = total, False
+                established.append(kept)
                 continue
             weights = np.exp(logs - total)
-            self._onset_weight[j] = sum(
-                float(w) for w, s in zip(weights, sources, strict=True) if s[2]
-            )
-            x0 = sum(w * s[1].x for w, s in zip(weights, sources, strict=True))
+            x0 = sum(w * h.filter.x for w, h in zip(weights, members, strict=True))
             p0 = np.zeros((self._dim, self._dim))
-            for w, (_, kf, jump) in zip(weights, sources, strict=True):
-                d = kf.x - x0
-                p0 += w * (kf.P + np.outer(d, d) + jump * self._jump_cov)
-            mixed[j] = (np.asarray(x0, dtype=np.float64), p0, total)
-        for j, (x0, p0, total) in mixed.items():
-            if j not in self.filters:
-                self.filters[j] = self._new_filter(x0, p0)
-            else:
-                self.filters[j].x, self.filters[j].P = x0, p0
-            self.log_prob[j] = total
+            for w, h in zip(weights, members, strict=True):
+                d = h.filter.x - x0
+                p0 += w * (h.filter.P + np.outer(d, d))
+            kept = members[0]
+            kept.filter.x, kept.filter.P = np.asarray(x0, dtype=np.float64), p0
+            kept.log_prob, kept.fresh = total, False
+            established.append(kept)
+        fresh = [
+            Hypothesis(
+                h.count + 1,
+                self._new_filter(h.filter.x, h.filter.P + self._jump_cov),
+                h.log_prob - (log_stay if h.count < self.n_rollers else 0.0) + log_jump,
+                fresh=True,
+            )
+            for h in established
+            if h.count < self.n_rollers and math.isfinite(h.log_prob)
+        ]
+        self.hypotheses = established + fresh
 
-    def step(self, block: Block, *, evidence: bool = True) -> StepResult:
-        """Mix, predict, update and reweight for one block (see the module docstring).
+    def step(self, block: Block, *, jerk_psd: float, evidence: bool = True) -> StepResult:
+        """Merge, predict, update and reweight for one block (see the module docstring).
 
+        ``jerk_psd``: the load model's jerk density for this block [N^2/s^5].
         ``evidence=False``: the filters update but the probabilities are not reweighted
         (the caller knows the block cannot tell jams from load changes).
         """
         dt = block.duration_s
-        self._mix(dt)
-        predictions: dict[int, Prediction] = {}
-        nis: dict[int, float] = {}
-        log_likelihood: dict[int, float] = {}
+        self._merge(dt)
+        nis: list[float] = []
+        log_likelihood: list[float] = []
         z = np.array([block.motor_torque_nm])
-        for k, kf in self.filters.items():
-            transition, noise = self._process(k, dt, kf.x)
+        for h in self.hypotheses:
+            kf = h.filter
+            transition, noise = self._process(h.count, dt, kf.x, jerk_psd)
             if isinstance(kf, UnscentedKalmanFilter):
                 kf.Q = noise
                 kf.predict(dt=dt, fx=_transition_apply, transition=transition)
             else:
                 kf.F, kf.Q = transition, noise
                 kf.predict()
-            onset = self._onset_weight.get(k, 0.0)
-            mean, jacobian, variance = self._measurement(kf.x, block, k, onset)
+            onset = 1.0 if h.fresh else 0.0
+            mean, jacobian, variance = self._measurement(kf.x, block, h.count, onset)
             if isinstance(kf, UnscentedKalmanFilter):
-                kf.update(z, R=np.array([[variance]]), hx=self._hx(block, k, onset))
+                kf.update(z, R=np.array([[variance]]), hx=self._hx(block, h.count, onset))
             else:
                 kf.update(
                     z,
@@ -251,20 +282,20 @@ class JamHypotheses:
                 )
             innovation = float(kf.y[0])
             spread = float(kf.S[0, 0])
-            nis[k] = innovation**2 / spread
-            log_likelihood[k] = -0.5 * (nis[k] + math.log(2.0 * math.pi * spread))
-        gated = min(nis.values()) > self._params.filter.gate_nis
-        for k, kf in self.filters.items():
+            nis.append(innovation**2 / spread)
+            log_likelihood.append(-0.5 * (nis[-1] + math.log(2.0 * math.pi * spread)))
+        gated = min(nis) > self._params.filter.gate_nis
+        predictions = []
+        for h in self.hypotheses:
+            kf = h.filter
             if gated:  # no hypothesis explains the block: keep the predicted states
                 kf.x, kf.P = kf.x_prior.copy(), kf.P_prior.copy()
             kf.P = self._safe_covariance(kf.P)
-            predictions[k] = self._model.predict(kf.x, block, k)
+            predictions.append(self._model.predict(kf.x, block, h.count))
         if evidence and block.direction and not gated:
-            for k in self.filters:
-                self.log_prob[k] += log_likelihood[k]
+            for h, value in zip(self.hypotheses, log_likelihood, strict=True):
+                h.log_prob += value
         self._normalise()
-        if self._prune:
-            self._drop_unlikely()
         return StepResult(predictions=predictions, nis=nis, gated=gated)
 
     def _measurement(
@@ -311,39 +342,42 @@ class JamHypotheses:
         return p
 
     def _normalise(self) -> None:
-        total = float(np.logaddexp.reduce(list(self.log_prob.values())))
-        for k in self.log_prob:
-            self.log_prob[k] -= total
+        total = float(np.logaddexp.reduce([h.log_prob for h in self.hypotheses]))
+        for h in self.hypotheses:
+            h.log_prob -= total
 
     def _drop_unlikely(self) -> None:
         """Prune hypotheses below the probability floor (never the most likely one)."""
         floor = math.log(max(self._params.filter.min_hypothesis_probability, 1e-300))
-        best = max(self.log_prob, key=self.log_prob.__getitem__)
-        for k in [k for k, value in self.log_prob.items() if value < floor and k != best]:
-            del self.filters[k], self.log_prob[k]
+        best = max(self.hypotheses, key=lambda h: h.log_prob)
+        self.hypotheses = [h for h in self.hypotheses if h.log_prob >= floor or h is best]
         self._normalise()
 
-    def restore(self, states: dict[int, tuple[FloatArray, FloatArray, float]]) -> None:
-        """Replace the hypotheses by saved ones: count -> (x, P, log probability)."""
-        self.filters = {
-            k: self._new_filter(x, self._safe_covariance(p)) for k, (x, p, _) in states.items()
-        }
-        self.log_prob = {k: log_probability for k, (_, _, log_probability) in states.items()}
+    def restore(self, states: list[tuple[int, bool, FloatArray, FloatArray, float]]) -> None:
+        """Replace the hypotheses by saved ones: (count, fresh, x, P, log probability)."""
+        self.hypotheses = [
+            Hypothesis(k, self._new_filter(x, self._safe_covariance(p)), log_prob, fresh)
+            for k, fresh, x, p, log_prob in states
+        ]
         self._normalise()
 
     def reinitialise_load(self, *, keep_load: bool = False) -> None:
         """Forget the load's derivatives, and unless ``keep_load`` the load too (after a time
         reset or a divergence; after a hole in the data, where the load may have moved on)."""
         forget = range(LOAD + 1 if keep_load else LOAD, LOAD_STATES)
-        for kf in self.filters.values():
-            x, p = kf.x.copy(), kf.P.copy()
+        for h in self.hypotheses:
+            x, p = h.filter.x.copy(), h.filter.P.copy()
             for i in forget:
                 if i != LOAD:
                     x[i] = 0.0
                 p[i, :] = 0.0
                 p[:, i] = 0.0
                 p[i, i] = self._initial_var[i]
-            kf.x, kf.P = x, p
+            h.filter.x, h.filter.P = x, p
+
+    def most_likely(self) -> Hypothesis:
+        """The hypothesis with the largest probability."""
+        return max(self.hypotheses, key=lambda h: h.log_prob)
 
 
 def _constant(value: FloatArray) -> Any:

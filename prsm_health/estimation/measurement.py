@@ -53,6 +53,8 @@ LOAD_STATES = 3
 #: carry a radial load below about the axial load (load_distribution.radial_capacity_ratio),
 #: so it vanishes with the axial load. scale = |F| L/2pi / sqrt(1 + (F / knee)^2).
 RIPPLE_KNEE_FRACTION = 0.2
+#: Below this fraction of the rated load the friction's slope takes the resisting side.
+KINK_FRACTION = 1e-2
 
 
 @dataclass(frozen=True)
@@ -90,6 +92,7 @@ class TorqueModel:
         self._gear_loss = (1.0 - drive.gear_efficiency) / drive.gear_efficiency
         self._inertia = drive.inertia_at_motor_kg_m2
         self._ripple_knee_n = RIPPLE_KNEE_FRACTION * params.rated_load_n
+        self._kink_n = KINK_FRACTION * params.rated_load_n
         self._wear_scale = actuator.wear_acceleration * params.model.wear_coefficient_factor
         self._actuator = actuator
         noise = params.noise
@@ -143,7 +146,12 @@ class TorqueModel:
                 healthy * (slope[ROLLING] + slope[VISCOUS] * speed_factor) + jammed * slope[SLIDING]
             )
             screw_torque = load * self._load_arm_m + direction * friction
-            d_screw_d_load = self._load_arm_m + direction * math.copysign(friction_slope, load)
+            # Friction depends on |F|: its slope changes sign with F. Near F = 0 the resisting
+            # side is taken (F d > 0): with three or more jammed rollers the friction per
+            # newton exceeds the load arm, and an assisting load of a self-locked screw needs
+            # the same motor torque as a smaller resisting one; the common case wins there.
+            side = load if abs(load) > self._kink_n else float(direction)
+            d_screw_d_load = self._load_arm_m + direction * math.copysign(friction_slope, side)
             band_var = 0.0
             if self.ripple and jammed:
                 # The ripple scales with the load torque: c, s are relative amplitudes.

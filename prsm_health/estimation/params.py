@@ -61,7 +61,7 @@ class NoiseParams:
 
     current_std_a: float = 0.05
     speed_std_rad_s: float = 0.2
-    model_error_rel: float = 0.003
+    model_error_rel: float = 0.0015
     model_error_floor_nm: float = 0.005
 
     def __post_init__(self) -> None:
@@ -98,7 +98,9 @@ class ModelParams:
 
     radial_load_ratio: float = 0.15
     radial_load_ratio_std: float = 0.1
-    load_jerk_psd_n2_per_s5: float = 5.0e12
+    load_jerk_psd_n2_per_s5: float = 5.0e11
+    load_jerk_psd_transition_n2_per_s5: float = 5.0e12
+    load_transition_s: float = 1.0
     ripple_prior_std: float = 0.3
     ripple_random_walk_per_sqrt_s: float = 0.1
     jam_rate_per_h: float = 1e-3
@@ -114,6 +116,8 @@ class ModelParams:
                 "radial_load_ratio": (0.0, 0.9),
                 "radial_load_ratio_std": (0.0, 1.0),
                 "load_jerk_psd_n2_per_s5": (1e-3, 1e24),
+                "load_jerk_psd_transition_n2_per_s5": (1e-3, 1e24),
+                "load_transition_s": (0.0, 1e3),
                 "ripple_prior_std": (1e-9, 10.0),
                 "ripple_random_walk_per_sqrt_s": (1e-9, 10.0),
                 "jam_rate_per_h": (1e-12, 1e6),
@@ -338,3 +342,22 @@ def load_params(path: Path) -> EstimatorParams:
         return params_from_mapping(load_yaml_mapping(path))
     except YamlError as exc:
         raise ParameterError("params", str(exc)) from exc
+
+
+#: The bundled parameters of the downhole actuator, relative to the package's share directory
+#: (installed) or the source tree (editable install, checkout).
+BUNDLED_PARAMS = Path("config", "default.yaml")
+
+
+def bundled_params_file() -> Path:
+    """``config/default.yaml``: from the ament index when the package is installed there, else
+    from the source tree."""
+    try:
+        from ament_index_python.packages import get_package_share_directory
+
+        installed = Path(get_package_share_directory("prsm_health")) / BUNDLED_PARAMS
+        if installed.is_file():
+            return installed
+    except (ImportError, LookupError, OSError, ValueError):  # not installed through ament
+        pass
+    return Path(__file__).resolve().parents[2] / BUNDLED_PARAMS

@@ -9,7 +9,12 @@ import pytest
 from filterpy.kalman import IMMEstimator, KalmanFilter
 
 from prsm_health.actuator import Actuator
-from prsm_health.estimation.hypotheses import JamHypotheses, repair_covariance, safe_sqrt
+from prsm_health.estimation.hypotheses import (
+    Hypothesis,
+    JamHypotheses,
+    repair_covariance,
+    safe_sqrt,
+)
 from prsm_health.estimation.inputs import Block
 from prsm_health.estimation.measurement import TorqueModel
 from prsm_health.estimation.params import EstimatorParams, Fidelity, ModelParams
@@ -26,34 +31,38 @@ def params(**fidelity: object) -> EstimatorParams:
     )
 
 
-def test_mixing_equals_filterpy_imm_estimator() -> None:
-    """Without pruning and without ripple states, our mixing is filterpy's IMM mixing."""
+def test_merging_equals_filterpy_imm_state_estimate_and_fresh_jams_are_born() -> None:
+    """A count's established and fresh hypotheses merge by filterpy's IMM moment matching
+    (IMMEstimator's combined x and P); each established count gives birth to count + 1."""
     p = params(prune_hypotheses=False)
     bank = JamHypotheses(p, TorqueModel(p))
     rng = np.random.default_rng(3)
-    n = bank.n_rollers + 1
-    mu = rng.dirichlet(np.ones(n))
-    reference = []
-    for k in range(n):
-        x = rng.normal(0.0, 1e3, bank.filters[k].dim_x)
-        a = rng.normal(0.0, 1.0, (len(x), len(x)))
-        cov = a @ a.T + np.eye(len(x))
-        bank.filters[k].x, bank.filters[k].P = x.copy(), cov.copy()
-        bank.log_prob[k] = math.log(mu[k])
-        kf = KalmanFilter(dim_x=len(x), dim_z=1)
-        kf.x, kf.P, kf.Q = x.copy(), cov.copy(), np.zeros_like(cov)
-        reference.append(kf)
+    dim = bank.hypotheses[0].filter.dim_x
+    members = []
+    for fresh in (False, True):
+        x = rng.normal(0.0, 1e3, dim)
+        a = rng.normal(0.0, 1.0, (dim, dim))
+        kf = KalmanFilter(dim_x=dim, dim_z=1)
+        kf.x, kf.P = x, a @ a.T + np.eye(dim)
+        members.append(Hypothesis(2, bank._new_filter(kf.x, kf.P), math.log(0.3), fresh))
+        members[-1].reference = kf  # type: ignore[attr-defined]
+    members[1].log_prob = math.log(0.1)
+    bank.hypotheses = [Hypothesis(0, bank._new_filter(np.zeros(dim), np.eye(dim)), math.log(0.6))]
+    bank.hypotheses += members
     dt = 0.04
     p_jump = -math.expm1(-1.0 * dt)  # jam_rate_per_h = 3600 -> 1 per second
-    transition = np.eye(n) * (1.0 - p_jump) + np.eye(n, k=1) * p_jump
-    transition[-1, -1] = 1.0
-    imm = IMMEstimator(reference, mu, transition)
-    imm.predict()  # mixes, then F = I, Q = 0 predicts leave the mixed states unchanged
-    bank._mix(dt)
-    for k in range(n):
-        assert bank.filters[k].x == pytest.approx(reference[k].x, rel=1e-12, abs=1e-9)
-        assert pytest.approx(reference[k].P, rel=1e-12, abs=1e-9) == bank.filters[k].P
-        assert math.exp(bank.log_prob[k]) == pytest.approx(imm.cbar[k], rel=1e-12)
+    imm = IMMEstimator([m.reference for m in members], np.array([0.75, 0.25]), np.eye(2))  # type: ignore[attr-defined]
+    imm._compute_state_estimate()
+    bank._merge(dt)
+    merged = [h for h in bank.hypotheses if h.count == 2 and not h.fresh]
+    assert len(merged) == 1
+    np.testing.assert_allclose(merged[0].filter.x, imm.x, rtol=1e-12)
+    np.testing.assert_allclose(merged[0].filter.P, imm.P, rtol=1e-12)
+    assert math.exp(merged[0].log_prob) == pytest.approx(0.4 * (1 - p_jump), rel=1e-12)
+    born = {h.count: h for h in bank.hypotheses if h.fresh}
+    assert sorted(born) == [1, 3]
+    np.testing.assert_array_equal(born[3].filter.x, merged[0].filter.x)
+    assert math.exp(born[1].log_prob) == pytest.approx(0.6 * p_jump, rel=1e-12)
 
 
 def moving_block(torque_nm: float, rng: np.random.Generator) -> Block:
@@ -78,11 +87,12 @@ def test_random_blocks_keep_covariances_spd_and_probabilities_normalised(kind: s
     rng = np.random.default_rng(11)
     for _ in range(300):
         torque = float(rng.choice([0.0, 1e-300, 3.0, -7.0, 50.0, 1e4]))
-        bank.step(moving_block(torque, rng))
+        bank.step(moving_block(torque, rng), jerk_psd=5e12)
         probs = bank.probabilities()
         assert probs.sum() == pytest.approx(1.0, abs=1e-12)
         assert np.all(probs >= 0.0)
-        for kf in bank.filters.values():
+        for h in bank.hypotheses:
+            kf = h.filter
             assert np.all(np.isfinite(kf.x))
             np.testing.assert_array_equal(kf.P, kf.P.T)
             scale = np.sqrt(np.diagonal(kf.P))
@@ -106,8 +116,8 @@ def test_safe_sqrt_repairs_a_matrix_that_lost_definiteness() -> None:
 def test_pruning_keeps_the_likely_counts_and_the_next_one() -> None:
     p = params(prune_hypotheses=True)
     bank = JamHypotheses(p, TorqueModel(p))
-    assert sorted(bank.filters) == [0]
+    assert [h.count for h in bank.hypotheses] == [0]
     rng = np.random.default_rng(5)
-    bank.step(moving_block(4.0, rng))
-    assert sorted(bank.filters)[0] == 0
-    assert len(bank.filters) <= 3
+    bank.step(moving_block(4.0, rng), jerk_psd=5e12)
+    assert sorted(h.count for h in bank.hypotheses) == [0, 1]  # 1: a jam in this block
+    assert [h.fresh for h in bank.hypotheses] == [False, True]

@@ -48,8 +48,8 @@ def test_a_state_of_another_actuator_is_refused() -> None:
     "damage",
     [
         lambda s: s.pop("hypotheses"),
-        lambda s: s["hypotheses"]["0"].update(x=[1.0]),
-        lambda s: s["hypotheses"]["0"].update(P=[[float("nan")] * 4] * 4),
+        lambda s: s["hypotheses"][0].update(x=[1.0]),
+        lambda s: s["hypotheses"][0].update(P=[[float("nan")] * 5] * 5),
         lambda s: s["degradation"].update(precision_loss_m="a lot"),
         lambda s: s.update(format=99),
     ],

@@ -1,0 +1,267 @@
+"""Offline replay: a bag's motor samples through the estimator, as fast as it can go.
+
+``prsm-health replay BAG`` (cli.py) runs :func:`replay`: it reads the inputs (MotorState, or
+JointState by :class:`~prsm_health.bags.reader.InputTopics`) chunk by chunk, runs one
+:class:`~prsm_health.estimation.estimator.HealthEstimator`, and optionally
+
+- writes an MCAP bag (``out``) with the inputs, ``/prsm_health/health`` (HealthEstimate) and
+  ``/diagnostics`` (DiagnosticArray, once per second of bag time, input counters brought up
+  to date every OUTPUT_PIECE_SAMPLES samples): the content the node
+  publishes (both are built by :mod:`prsm_health.outputs`), on the bag's time line;
+- scores the estimates against the bag's ``/truth/state`` (:mod:`~prsm_health.estimation.metrics`).
+
+A damaged bag (cut short, a corrupt chunk) is not fatal: everything read before the damage is
+estimated and reported, and the damage is returned in :attr:`ReplayResult.damage`.
+"""
+
+from __future__ import annotations
+
+import time
+from collections import Counter
+from collections.abc import Callable, Iterator
+from contextlib import ExitStack
+from dataclasses import dataclass
+from pathlib import Path
+from types import TracebackType
+from typing import Any
+
+import numpy as np
+
+from prsm_health.bags import (
+    DIAGNOSTIC_ARRAY,
+    HEALTH_ESTIMATE,
+    BagDamagedError,
+    BagError,
+    BagWriter,
+    InputTopics,
+    iter_motor_samples,
+    read_truth,
+    write_motor_states,
+)
+from prsm_health.bags.stamps import seconds_to_stamps
+from prsm_health.bags.typestore import typestore
+from prsm_health.estimation.estimate import HealthState
+from prsm_health.estimation.estimator import HealthEstimator
+from prsm_health.estimation.inputs import InputCounters
+from prsm_health.estimation.metrics import Metrics, score
+from prsm_health.estimation.params import EstimatorParams
+from prsm_health.outputs import DiagnosticStatusData, diagnostic_statuses, health_estimate_fields
+from prsm_health.signals import MotorSamples, TruthSamples
+from prsm_health.tracking import EventTracker, InputTracker, rejected_by_reason
+
+#: Topics of the replay's output bag (the node's, with the node named prsm_health).
+HEALTH_TOPIC = "/prsm_health/health"
+DIAGNOSTICS_TOPIC = "/diagnostics"
+#: Diagnostics are written once per this many seconds of bag time.
+DIAGNOSTICS_PERIOD_S = 1.0
+#: Samples read per chunk.
+CHUNK_SAMPLES = 20_000
+#: With an output bag, samples are estimated in pieces of this many (1 s at 1 kHz), after each
+#: of which the input-health counters are brought up to date.
+OUTPUT_PIECE_SAMPLES = 1000
+
+
+@dataclass(frozen=True)
+class ReplayResult:
+    """What a replay produced.
+
+    states: every estimate. counters: the estimator's input counters. samples: samples read.
+    truth: the bag's ground truth (None without /truth/state). metrics: scores against it.
+    damage: the error that ended reading early (the rest of the result covers what was read
+    before it), or None. elapsed_s: wall time of reading and estimating (without writing
+    ``out`` or scoring).
+    """
+
+    states: list[HealthState]
+    counters: InputCounters
+    samples: int
+    truth: TruthSamples | None
+    metrics: Metrics | None
+    damage: BagError | None
+    elapsed_s: float
+
+
+def _chunks(bag: Path, topics: InputTopics, damage: list[BagError]) -> Iterator[MotorSamples]:
+    """The bag's samples; damage found on the way ends the iteration and is kept."""
+    try:
+        yield from iter_motor_samples(bag, topics, chunk_size=CHUNK_SAMPLES)
+    except BagDamagedError as exc:
+        damage.append(exc)
+
+
+def replay(
+    bag: Path,
+    params: EstimatorParams,
+    *,
+    topics: InputTopics | None = None,
+    out: Path | None = None,
+    hardware_id: str = "prsm_health",
+    progress: Callable[[int], None] | None = None,
+) -> ReplayResult:
+    """Run the estimator over ``bag`` (see the module docstring).
+
+    ``progress`` is called with the number of samples of each chunk read. Raises BagError
+    when the bag cannot be read at all (no such file, no input topic); damage after the start
+    is returned in the result instead.
+    """
+    topics = topics or InputTopics()
+    estimator = HealthEstimator(params)
+    states: list[HealthState] = []
+    damage: list[BagError] = []
+    samples = 0
+    elapsed = 0.0
+    with ExitStack() as stack:
+        output = stack.enter_context(_Output(out, params, hardware_id)) if out else None
+        started = time.perf_counter()
+        for chunk in _chunks(bag, topics, damage):
+            # With an output bag, the diagnostics need the input counters once a second.
+            step = OUTPUT_PIECE_SAMPLES if output is not None else len(chunk)
+            for begin in range(0, len(chunk), step):
+                piece = chunk[begin : begin + step]
+                new = estimator.process(piece)
+                elapsed += time.perf_counter() - started
+                states += new
+                if output is not None:
+                    output.add(piece, new, estimator.counters)
+                started = time.perf_counter()
+            samples += len(chunk)
+            if progress is not None:
+                progress(len(chunk))
+            started = time.perf_counter()
+        last = estimator.finish()
+        elapsed += time.perf_counter() - started
+        states += last
+        if output is not None:
+            output.add(None, last, estimator.counters)
+    truth = _truth(bag, damage)
+    metrics = None
+    if truth is not None and states and len(truth):
+        preset = params.actuator.preset
+        metrics = score(
+            states,
+            truth,
+            rated_load_n=params.rated_load_n,
+            largest_screw_speed_rad_s=preset.largest_speed_rpm * 2.0 * np.pi / 60.0,
+        )
+    return ReplayResult(
+        states=states,
+        counters=estimator.counters,
+        samples=samples,
+        truth=truth,
+        metrics=metrics,
+        damage=damage[0] if damage else None,
+        elapsed_s=elapsed,
+    )
+
+
+def _truth(bag: Path, damage: list[BagError]) -> TruthSamples | None:
+    """The bag's truth, or None; a damaged truth topic gives what was read before it."""
+    try:
+        truth, error = read_truth(bag, partial_ok=True)
+    except BagError:
+        return None
+    if error is not None and not damage:
+        damage.append(error)
+    return truth
+
+
+class _Output:
+    """The replay's output bag: inputs, health estimates, diagnostics once per second."""
+
+    def __init__(self, path: Path, params: EstimatorParams, hardware_id: str) -> None:
+        self._writer = BagWriter(path)
+        self._params = params
+        self._hardware_id = hardware_id
+        self._inputs = InputTracker()
+        self._events = EventTracker()
+        self._latest: HealthState | None = None
+        self._next_diagnostics_s: float | None = None
+        types = typestore().types
+        self._health_type = types[HEALTH_ESTIMATE]
+        self._header = types["std_msgs/msg/Header"]
+        self._time = types["builtin_interfaces/msg/Time"]
+        self._array = types[DIAGNOSTIC_ARRAY]
+        self._status = types["diagnostic_msgs/msg/DiagnosticStatus"]
+        self._key_value = types["diagnostic_msgs/msg/KeyValue"]
+
+    def __enter__(self) -> _Output:
+        self._writer.__enter__()
+        self._writer.add_topic(HEALTH_TOPIC, HEALTH_ESTIMATE)
+        self._writer.add_topic(DIAGNOSTICS_TOPIC, DIAGNOSTIC_ARRAY)
+        return self
+
+    def __exit__(
+        self,
+        kind: type[BaseException] | None,
+        error: BaseException | None,
+        trace: TracebackType | None,
+    ) -> None:
+        self._writer.__exit__(kind, error, trace)
+
+    def _stamp(self, seconds: float) -> Any:
+        sec, nanosec = seconds_to_stamps([seconds])
+        return self._time(sec=int(sec[0]), nanosec=int(nanosec[0]))
+
+    def add(
+        self, samples: MotorSamples | None, states: list[HealthState], counters: InputCounters
+    ) -> None:
+        """Write a chunk's inputs and the estimates and diagnostics they led to."""
+        if samples is not None and len(samples):
+            write_motor_states(self._writer, samples)
+        replaced: Counter[str] = Counter()
+        for state in states:
+            fields = health_estimate_fields(state, replaced=replaced)
+            header = self._header(stamp=self._stamp(state.stamp_s), frame_id=self._hardware_id)
+            message = self._health_type(header=header, **_typed(fields))
+            self._writer.write(HEALTH_TOPIC, _log_time_ns(state.stamp_s), message)
+        now = float(states[-1].stamp_s) if states else None
+        if now is None:
+            return
+        received = len(samples) if samples is not None else 0
+        rejected = rejected_by_reason(counters, {})
+        self._inputs.update(now, received, counters.accepted, rejected)
+        self._events.observe(now, states, counters)
+        self._events.non_finite(now, replaced)
+        self._latest = states[-1]
+        if self._next_diagnostics_s is None or now >= self._next_diagnostics_s:
+            self._write_diagnostics(now)
+            self._next_diagnostics_s = now + DIAGNOSTICS_PERIOD_S
+
+    def _write_diagnostics(self, now_s: float) -> None:
+        statuses = diagnostic_statuses(
+            self._latest,
+            self._inputs.health(now_s),
+            self._params.diagnostics,
+            self._params.rated_load_n,
+            self._hardware_id,
+            now_s,
+            self._events.events(),
+        )
+        message = self._array(
+            header=self._header(stamp=self._stamp(now_s), frame_id=""),
+            status=[self._status_message(s) for s in statuses],
+        )
+        self._writer.write(DIAGNOSTICS_TOPIC, _log_time_ns(now_s), message)
+
+    def _status_message(self, status: DiagnosticStatusData) -> Any:
+        return self._status(
+            level=int(status.level),
+            name=status.name,
+            message=status.message,
+            hardware_id=status.hardware_id,
+            values=[self._key_value(key=k, value=v) for k, v in status.values],
+        )
+
+
+def _typed(fields: dict[str, Any]) -> dict[str, Any]:
+    """Message field values as the rosbags classes want them (float64[] as a numpy array)."""
+    typed = dict(fields)
+    typed["jammed_rollers_probability"] = np.asarray(
+        fields["jammed_rollers_probability"], dtype=np.float64
+    )
+    return typed
+
+
+def _log_time_ns(stamp_s: float) -> int:
+    """A log time for an output message at a (finite) estimate stamp, never negative."""
+    return max(round(stamp_s * 1e9), 0)

@@ -1,0 +1,127 @@
+"""The replay's report: PNG plots of the estimates against the truth, and an index page.
+
+``prsm-health replay BAG --report DIR`` writes ``load.png`` (axial load with +-2 std and the
+truth), ``jams.png`` (probability of each jam count over time, the true count on top),
+``precision_loss.png`` (estimate +-2 std and the truth) and ``index.html`` (the three plots
+and the metrics). matplotlib's Agg backend: no display needed.
+"""
+
+from __future__ import annotations
+
+import html
+import json
+from dataclasses import dataclass
+from pathlib import Path
+
+import matplotlib
+
+matplotlib.use("Agg")
+import matplotlib.pyplot as plt
+import numpy as np
+from matplotlib.axes import Axes
+from numpy.typing import NDArray
+
+from prsm_health.estimation.estimate import UM_PER_M, HealthState
+from prsm_health.estimation.metrics import Metrics
+from prsm_health.signals import TruthSamples
+
+FloatArray = NDArray[np.float64]
+PLOTS = ("load.png", "jams.png", "precision_loss.png")
+
+
+@dataclass(frozen=True)
+class _Series:
+    stamp_s: FloatArray
+    load_kn: FloatArray
+    load_std_kn: FloatArray
+    jams: FloatArray  # (estimates, counts)
+    loss_um: FloatArray
+    loss_std_um: FloatArray
+
+
+def _series(states: list[HealthState]) -> _Series:
+    return _Series(
+        stamp_s=np.array([s.stamp_s for s in states]),
+        load_kn=np.array([s.axial_load_n for s in states]) / 1e3,
+        load_std_kn=np.array([s.axial_load_std_n for s in states]) / 1e3,
+        jams=np.array([s.jam_probabilities for s in states]),
+        loss_um=np.array([s.precision_loss_m for s in states]) * UM_PER_M,
+        loss_std_um=np.array([s.precision_loss_std_m for s in states]) * UM_PER_M,
+    )
+
+
+def _band(axis: Axes, t: FloatArray, mean: FloatArray, std: FloatArray, label: str) -> None:
+    axis.fill_between(t, mean - 2 * std, mean + 2 * std, alpha=0.3, label=f"{label} +-2 std")
+    axis.plot(t, mean, lw=1.0, label=label)
+
+
+def write_report(
+    directory: Path,
+    states: list[HealthState],
+    truth: TruthSamples | None,
+    metrics: Metrics | None,
+    *,
+    title: str,
+) -> list[Path]:
+    """Write the plots and ``index.html`` into ``directory`` (created); returns the files."""
+    if not states:
+        raise ValueError("report: no estimates to plot")
+    directory.mkdir(parents=True, exist_ok=True)
+    series = _series(states)
+    t = series.stamp_s
+    figures = []
+
+    figure, axis = plt.subplots(figsize=(10, 4))
+    _band(axis, t, series.load_kn, series.load_std_kn, "estimate")
+    if truth is not None:
+        axis.plot(truth.stamp_s, truth.axial_load_n / 1e3, "k--", lw=0.8, label="truth")
+    axis.set(xlabel="time [s]", ylabel="axial load [kN]", title=f"{title}: axial load")
+    axis.legend(loc="best")
+    figures.append(figure)
+
+    figure, axis = plt.subplots(figsize=(10, 4))
+    counts = series.jams.shape[1]
+    shown = [k for k in range(counts) if series.jams[:, k].max() > 1e-3]
+    axis.stackplot(t, series.jams[:, shown].T, labels=[f"P({k} jammed)" for k in shown])
+    if truth is not None:
+        axis2 = axis.twinx()
+        axis2.step(truth.stamp_s, truth.jammed_rollers, "k--", lw=0.8, where="post")
+        axis2.set_ylabel("true jammed rollers")
+        axis2.set_ylim(-0.1, max(2, int(truth.jammed_rollers.max()) + 1))
+    axis.set(xlabel="time [s]", ylabel="probability", ylim=(0, 1), title=f"{title}: jams")
+    axis.legend(loc="center left")
+    figures.append(figure)
+
+    figure, axis = plt.subplots(figsize=(10, 4))
+    _band(axis, t, series.loss_um, series.loss_std_um, "estimate")
+    if truth is not None:
+        axis.plot(truth.stamp_s, truth.precision_loss_m * UM_PER_M, "k--", lw=0.8, label="truth")
+    axis.set(xlabel="time [s]", ylabel="precision loss [µm]", title=f"{title}: precision loss")
+    axis.legend(loc="best")
+    figures.append(figure)
+
+    files = []
+    for name, figure in zip(PLOTS, figures, strict=True):
+        path = directory / name
+        figure.tight_layout()
+        figure.savefig(path, dpi=100)
+        plt.close(figure)
+        files.append(path)
+    index = directory / "index.html"
+    index.write_text(_index_html(title, metrics), encoding="utf-8")
+    files.append(index)
+    return files
+
+
+def _index_html(title: str, metrics: Metrics | None) -> str:
+    scores = (
+        f"<pre>{html.escape(json.dumps(metrics.to_dict(), indent=2))}</pre>"
+        if metrics is not None
+        else "<p>The bag has no ground truth (/truth/state): no metrics.</p>"
+    )
+    images = "\n".join(f'<p><img src="{name}" alt="{name}"></p>' for name in PLOTS)
+    return (
+        f"<!doctype html>\n<html><head><meta charset='utf-8'><title>{html.escape(title)}"
+        f"</title></head>\n<body><h1>{html.escape(title)}</h1>\n{images}\n"
+        f"<h2>Metrics</h2>\n{scores}\n</body></html>\n"
+    )
