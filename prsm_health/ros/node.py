@@ -226,10 +226,7 @@ class HealthNode(LifecycleNode):
                 f"{outcome.problem}; kept as {outcome.kept_corrupt}; starting fresh"
             )
         elif outcome.restored:
-            loss_um = estimator.snapshot()["degradation"].get("precision_loss_m", 0.0) * 1e6
-            self.get_logger().info(
-                f"resumed from {config.state_file} (precision loss {loss_um:.4g} um)"
-            )
+            self.get_logger().info(f"resumed from {config.state_file}")
         else:
             self.get_logger().info(f"no state file at {config.state_file}: starting fresh")
         self._config, self._estimator, self._store = config, estimator, store
