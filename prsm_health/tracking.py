@@ -2,7 +2,8 @@
 
 ROS-free (the node feeds them on its clock; an offline replay could feed them on bag time).
 :class:`InputTracker` gives :class:`~prsm_health.outputs.InputHealth`,
-:class:`EventTracker` gives :class:`~prsm_health.outputs.FilterEvents`.
+:class:`EventTracker` gives :class:`~prsm_health.outputs.FilterEvents`, and
+:class:`DiagnosticsTracker` holds both for one actuator and gives its statuses.
 """
 
 from __future__ import annotations
@@ -12,7 +13,13 @@ from collections.abc import Iterable, Mapping
 
 from prsm_health.estimation.estimate import EstimateEvent, HealthState
 from prsm_health.estimation.inputs import InputCounters, RejectReason
-from prsm_health.outputs import FilterEvents, InputHealth
+from prsm_health.estimation.params import EstimatorParams
+from prsm_health.outputs import (
+    DiagnosticStatusData,
+    FilterEvents,
+    InputHealth,
+    diagnostic_statuses,
+)
 
 #: Window of the input rate and of the recent rejected fraction [s].
 WINDOW_S = 1.0
@@ -131,4 +138,35 @@ class EventTracker:
             last_warning=self._warning[1] if self._warning else "",
             last_error_s=self._error[0] if self._error else None,
             last_error=self._error[1] if self._error else "",
+        )
+
+
+class DiagnosticsTracker:
+    """The input and event trackers of one actuator, and the diagnostics they give.
+
+    For the node and the offline replay alike: feed ``inputs`` and ``events`` as samples are
+    processed; :meth:`statuses` gives the estimator statuses at ``now_s``.
+    """
+
+    def __init__(self) -> None:
+        self.inputs = InputTracker()
+        self.events = EventTracker()
+
+    def statuses(
+        self,
+        state: HealthState | None,
+        params: EstimatorParams,
+        hardware_id: str,
+        now_s: float,
+    ) -> list[DiagnosticStatusData]:
+        """:func:`~prsm_health.outputs.diagnostic_statuses` for the latest ``state``, with the
+        thresholds and rated load of ``params``."""
+        return diagnostic_statuses(
+            state,
+            self.inputs.health(now_s),
+            params.diagnostics,
+            params.rated_load_n,
+            hardware_id,
+            now_s,
+            self.events.events(),
         )

@@ -9,7 +9,9 @@ import pytest
 
 from prsm_health.estimation.estimate import EstimateEvent
 from prsm_health.estimation.inputs import InputCounters, RejectReason
-from prsm_health.tracking import EventTracker, InputTracker, rejected_by_reason
+from prsm_health.estimation.params import params_from_mapping
+from prsm_health.outputs import FILTER_CONSISTENCY, INPUT_HEALTH, STATUS_NAMES
+from prsm_health.tracking import DiagnosticsTracker, EventTracker, InputTracker, rejected_by_reason
 from test.test_outputs import state
 
 
@@ -67,3 +69,16 @@ def test_event_tracker() -> None:
     events = tracker.events()
     assert (events.non_finite_outputs, events.processing_errors) == (2, 1)
     assert (events.last_error_s, events.last_error) == (8.0, "processing error: boom")
+
+
+def test_diagnostics_tracker_gives_the_statuses() -> None:
+    params = params_from_mapping({"actuator": {"preset": "dong2022-downhole"}})
+    tracker = DiagnosticsTracker()
+    tracker.inputs.update(10.0, 100, accepted=95, rejected={"spike": 5})
+    tracker.events.error(10.0, "boom")
+    statuses = tracker.statuses(state(), params, "left", 10.2)
+    assert [s.name for s in statuses] == list(STATUS_NAMES)
+    by_name = {s.name: s for s in statuses}
+    assert ("rated_load_n", "55000") in by_name[STATUS_NAMES[0]].values
+    assert ("rejected_spike", "5") in by_name[INPUT_HEALTH].values
+    assert by_name[FILTER_CONSISTENCY].message == "processing error: boom"

@@ -52,7 +52,6 @@ from prsm_health.estimation.estimate import HealthState
 from prsm_health.estimation.estimator import HealthEstimator
 from prsm_health.outputs import (
     PersistenceHealth,
-    diagnostic_statuses,
     health_estimate_fields,
     persistence_status,
 )
@@ -75,7 +74,7 @@ from prsm_health.ros.parameters import (
 from prsm_health.ros.persistence import StateStore
 from prsm_health.ros.runtime import ros_session
 from prsm_health.signals import MotorSamples
-from prsm_health.tracking import EventTracker, InputTracker, rejected_by_reason
+from prsm_health.tracking import DiagnosticsTracker, rejected_by_reason
 
 NS_PER_S = 1e9
 HEALTH_QOS_DEPTH = 100
@@ -314,8 +313,7 @@ class HealthNode(LifecycleNode):
     def _reset_run_state(self) -> None:
         self._pending = _Pending()
         self._node_rejects: Counter[str] = Counter()
-        self._inputs = InputTracker()
-        self._events = EventTracker()
+        self._tracker = DiagnosticsTracker()
         self._latest: HealthState | None = None
         self._latest_published = True
         self._frame_id = ""
@@ -360,9 +358,10 @@ class HealthNode(LifecycleNode):
             self._fault("JointState input", exc)
 
     def _fault(self, where: str, exc: BaseException) -> None:
-        self._events.error(self._now_s(), f"{where}: {exc!r}")
+        events = self._tracker.events
+        events.error(self._now_s(), f"{where}: {exc!r}")
         self.get_logger().error(
-            f"{where}: {exc!r} ({self._events.processing_errors} errors so far)",
+            f"{where}: {exc!r} ({events.processing_errors} errors so far)",
             throttle_duration_sec=1.0,
         )
 
@@ -376,10 +375,9 @@ class HealthNode(LifecycleNode):
             states = estimator.process(samples) if len(samples) else []
             now = self._now_s()
             counters = estimator.counters
-            self._inputs.update(
-                now, received, counters.accepted, rejected_by_reason(counters, self._node_rejects)
-            )
-            self._events.observe(now, states, counters)
+            rejected = rejected_by_reason(counters, self._node_rejects)
+            self._tracker.inputs.update(now, received, counters.accepted, rejected)
+            self._tracker.events.observe(now, states, counters)
             if states:
                 self._latest = states[-1]
                 self._latest_published = False
@@ -392,7 +390,7 @@ class HealthNode(LifecycleNode):
     def _publish_health(self, state: HealthState) -> None:
         replaced: Counter[str] = Counter()
         fields = health_estimate_fields(state, replaced=replaced)
-        self._events.non_finite(self._now_s(), replaced)
+        self._tracker.events.non_finite(self._now_s(), replaced)
         self._health_pub.publish(health_estimate(fields, state.stamp_s, self._frame_id))
         self._latest_published = True
 
@@ -409,14 +407,8 @@ class HealthNode(LifecycleNode):
             if config is None:
                 return
             now = self._now_s()
-            statuses = diagnostic_statuses(
-                self._latest,
-                self._inputs.health(now),
-                config.estimator.diagnostics,
-                config.estimator.rated_load_n,
-                config.hardware_id,
-                now,
-                self._events.events(),
+            statuses = self._tracker.statuses(
+                self._latest, config.estimator, config.hardware_id, now
             )
             statuses.append(persistence_status(self._persistence, config.hardware_id, now))
             self._diagnostics_pub.publish(diagnostic_array(statuses, now))
