@@ -40,6 +40,7 @@ from typing import Any
 import numpy as np
 from filterpy.kalman import ExtendedKalmanFilter, MerweScaledSigmaPoints, UnscentedKalmanFilter
 from numpy.typing import NDArray
+from scipy.linalg.lapack import dpotrf
 
 from prsm_health.estimation.inputs import Block
 from prsm_health.estimation.measurement import (
@@ -48,6 +49,7 @@ from prsm_health.estimation.measurement import (
     LOAD_RATE,
     LOAD_STATES,
     RIPPLE_COS,
+    RIPPLE_SIN,
     Prediction,
     TorqueModel,
 )
@@ -55,6 +57,9 @@ from prsm_health.estimation.params import EstimatorParams
 
 FloatArray = NDArray[np.float64]
 Filter = Any  # filterpy filters carry no type information
+
+#: Hypotheses less probable than exp(this) reuse their prediction from before the update.
+NEGLIGIBLE_LOG_PROBABILITY = math.log(1e-6)
 
 #: Smallest variance kept on each state, relative to its initial variance.
 VARIANCE_FLOOR_RATIO = 1e-12
@@ -146,6 +151,11 @@ class JamHypotheses:
         self._jump_cov = np.zeros((self._dim, self._dim))
         if self._ripple:
             self._jump_cov[RIPPLE_COS:, RIPPLE_COS:] = np.eye(2) * params.model.ripple_prior_std**2
+        self._spare_filters: list[Filter] = []
+        self._load_process_cache: tuple[object, tuple[FloatArray, FloatArray]] = (
+            None,
+            (initial, initial),
+        )
         start = params.model.initial_jammed_rollers
         counts = [start] if self._prune else list(range(self.n_rollers + 1))
         self.hypotheses = [
@@ -159,6 +169,11 @@ class JamHypotheses:
 
     # --- filters ------------------------------------------------------------------------
     def _new_filter(self, x: FloatArray, p: FloatArray) -> Filter:
+        """A filter at (x, P); filters of merged-away hypotheses are reused."""
+        if self._spare_filters:
+            kf = self._spare_filters.pop()
+            kf.x, kf.P = x.copy(), p.copy()
+            return kf
         if self._params.fidelity.filter == "ukf":
             points = MerweScaledSigmaPoints(
                 self._dim, alpha=0.5, beta=2.0, kappa=0.0, sqrt_method=safe_sqrt
@@ -179,23 +194,34 @@ class JamHypotheses:
         (constant acceleration) process; the ripple (only when jammed) as a random walk,
         widened by its prior size times the relative change of its load scale
         (:meth:`TorqueModel.ripple_drift`)."""
-        transition = np.eye(self._dim)
-        transition[LOAD, LOAD_RATE] = transition[LOAD_RATE, LOAD_ACCELERATION] = dt
-        transition[LOAD, LOAD_ACCELERATION] = dt**2 / 2.0
-        q = jerk_psd
-        noise = np.zeros((self._dim, self._dim))
-        noise[:LOAD_STATES, :LOAD_STATES] = q * np.array(
-            [
-                [dt**5 / 20.0, dt**4 / 8.0, dt**3 / 6.0],
-                [dt**4 / 8.0, dt**3 / 3.0, dt**2 / 2.0],
-                [dt**3 / 6.0, dt**2 / 2.0, dt],
-            ]
-        )
+        transition, load_noise = self._load_process(dt, jerk_psd)
+        noise = load_noise
         if self._ripple and jammed:
             walk = self._params.model.ripple_random_walk_per_sqrt_s
             drift = self._model.ripple_drift(x, dt) * self._params.model.ripple_prior_std
-            noise[RIPPLE_COS:, RIPPLE_COS:] = np.eye(2) * (walk**2 * dt + drift**2)
+            noise = load_noise.copy()
+            noise[RIPPLE_COS, RIPPLE_COS] = noise[RIPPLE_SIN, RIPPLE_SIN] = walk**2 * dt + drift**2
         return transition, noise
+
+    def _load_process(self, dt: float, jerk_psd: float) -> tuple[FloatArray, FloatArray]:
+        """The load part of :meth:`_process` (cached: consecutive blocks share dt and psd)."""
+        key = (dt, jerk_psd)
+        if self._load_process_cache[0] != key:
+            transition = np.eye(self._dim)
+            transition[LOAD, LOAD_RATE] = transition[LOAD_RATE, LOAD_ACCELERATION] = dt
+            transition[LOAD, LOAD_ACCELERATION] = dt**2 / 2.0
+            noise = np.zeros((self._dim, self._dim))
+            noise[:LOAD_STATES, :LOAD_STATES] = jerk_psd * np.array(
+                [
+                    [dt**5 / 20.0, dt**4 / 8.0, dt**3 / 6.0],
+                    [dt**4 / 8.0, dt**3 / 3.0, dt**2 / 2.0],
+                    [dt**3 / 6.0, dt**2 / 2.0, dt],
+                ]
+            )
+            transition.setflags(write=False)
+            noise.setflags(write=False)
+            self._load_process_cache = (key, (transition, noise))
+        return self._load_process_cache[1]
 
     # --- the step -----------------------------------------------------------------------
     def probabilities(self) -> FloatArray:
@@ -222,9 +248,10 @@ class JamHypotheses:
             logs = np.array([h.log_prob + stay for h in members])
             total = float(np.logaddexp.reduce(logs))
             if len(members) == 1 or not math.isfinite(total):
-                kept = members[0] if len(members) == 1 else max(members, key=lambda h: h.log_prob)
+                kept = max(members, key=lambda h: h.log_prob)
                 kept.log_prob, kept.fresh = total, False
                 established.append(kept)
+                self._spare_filters += [h.filter for h in members if h is not kept]
                 continue
             weights = np.exp(logs - total)
             x0 = sum(w * h.filter.x for w, h in zip(weights, members, strict=True))
@@ -236,6 +263,7 @@ class JamHypotheses:
             kept.filter.x, kept.filter.P = np.asarray(x0, dtype=np.float64), p0
             kept.log_prob, kept.fresh = total, False
             established.append(kept)
+            self._spare_filters += [h.filter for h in members[1:]]
         fresh = [
             Hypothesis(
                 h.count + 1,
@@ -259,6 +287,7 @@ class JamHypotheses:
         self._merge(dt)
         nis: list[float] = []
         log_likelihood: list[float] = []
+        priors: list[Prediction] = []
         z = np.array([block.motor_torque_nm])
         for h in self.hypotheses:
             kf = h.filter
@@ -269,10 +298,10 @@ class JamHypotheses:
             else:
                 kf.F, kf.Q = transition, noise
                 kf.predict()
-            onset = 1.0 if h.fresh else 0.0
-            mean, jacobian, variance = self._measurement(kf.x, block, h.count, onset)
+            prior, mean, jacobian, variance = self._measurement(kf.x, block, h.count, h.fresh)
+            priors.append(prior)
             if isinstance(kf, UnscentedKalmanFilter):
-                kf.update(z, R=np.array([[variance]]), hx=self._hx(block, h.count, onset))
+                kf.update(z, R=np.array([[variance]]), hx=self._hx(block, h.count, h.fresh))
             else:
                 kf.update(
                     z,
@@ -285,44 +314,53 @@ class JamHypotheses:
             nis.append(innovation**2 / spread)
             log_likelihood.append(-0.5 * (nis[-1] + math.log(2.0 * math.pi * spread)))
         gated = min(nis) > self._params.filter.gate_nis
-        predictions = []
-        for h in self.hypotheses:
-            kf = h.filter
-            if gated:  # no hypothesis explains the block: keep the predicted states
-                kf.x, kf.P = kf.x_prior.copy(), kf.P_prior.copy()
-            kf.P = self._safe_covariance(kf.P)
-            predictions.append(self._model.predict(kf.x, block, h.count))
         if evidence and block.direction and not gated:
             for h, value in zip(self.hypotheses, log_likelihood, strict=True):
                 h.log_prob += value
         self._normalise()
+        predictions = []
+        for h, prior in zip(self.hypotheses, priors, strict=True):
+            kf = h.filter
+            if gated:  # no hypothesis explains the block: keep the predicted states
+                kf.x, kf.P = kf.x_prior.copy(), kf.P_prior.copy()
+            kf.P = self._safe_covariance(kf.P)
+            # The outputs weigh each prediction by its probability: for a negligible one the
+            # prediction before the update serves (it saves a model evaluation per block).
+            significant = h.log_prob > NEGLIGIBLE_LOG_PROBABILITY and not gated
+            predictions.append(self._model.predict(kf.x, block, h.count) if significant else prior)
         return StepResult(predictions=predictions, nis=nis, gated=gated)
 
     def _measurement(
-        self, x: FloatArray, block: Block, jammed: int, onset: float
-    ) -> tuple[float, FloatArray, float]:
-        """Predicted torque, its Jacobian and variance for hypothesis ``jammed``.
+        self, x: FloatArray, block: Block, jammed: int, fresh: bool
+    ) -> tuple[Prediction, float, FloatArray, float]:
+        """The model's prediction for ``jammed`` rollers, and the measurement's mean, Jacobian
+        and variance for the hypothesis.
 
-        ``onset`` is the share of the hypothesis' probability that arrives by a jam in this
-        block. Such a jam starts at a uniformly random instant inside the block, so the block
-        mean lies between the two counts' torques: with D the difference, the prediction
-        moves by -onset D / 2 and the variance grows by onset D^2 / 12 plus the spread of the
-        two-part mixture onset (1 - onset) D^2 / 4. Without this, the block in which a jam
-        starts would be explained by the new hypothesis' ripple states and corrupt them.
+        A fresh hypothesis' jam starts at a uniformly random instant inside the block, so the
+        block mean lies between the two counts' torques: with D their difference, the mean is
+        moved by -D / 2 and the variance grows by D^2 / 12. Without this, the block in which
+        a jam starts would be explained by the new hypothesis' ripple states and corrupt them.
         """
         prediction = self._model.predict(x, block, jammed)
-        if onset <= 0.0:
-            return prediction.motor_torque_nm, prediction.jacobian, prediction.variance_nm2
+        if not fresh:
+            return (
+                prediction,
+                prediction.motor_torque_nm,
+                prediction.jacobian,
+                prediction.variance_nm2,
+            )
         before = self._model.predict(x, block, jammed - 1)
         step = prediction.motor_torque_nm - before.motor_torque_nm
-        mean = prediction.motor_torque_nm - 0.5 * onset * step
-        jacobian = prediction.jacobian - 0.5 * onset * (prediction.jacobian - before.jacobian)
-        variance = prediction.variance_nm2 + step**2 * (onset / 12.0 + onset * (1.0 - onset) / 4.0)
-        return mean, jacobian, variance
+        return (
+            prediction,
+            prediction.motor_torque_nm - 0.5 * step,
+            0.5 * (prediction.jacobian + before.jacobian),
+            prediction.variance_nm2 + step**2 / 12.0,
+        )
 
-    def _hx(self, block: Block, jammed: int, onset: float) -> Any:
+    def _hx(self, block: Block, jammed: int, fresh: bool) -> Any:
         def hx(x: FloatArray) -> FloatArray:
-            return np.array([self._measurement(x, block, jammed, onset)[0]])
+            return np.array([self._measurement(x, block, jammed, fresh)[1]])
 
         return hx
 
@@ -333,11 +371,8 @@ class JamHypotheses:
         if np.any(diagonal < self._floor):
             p = p + np.diag(np.maximum(self._floor - diagonal, 0.0))
         scale = np.sqrt(np.diagonal(p))
-        try:
-            root = np.linalg.cholesky(p / np.outer(scale, scale))
-            if float(np.diagonal(root).min()) ** 2 < CORRELATION_FLOOR:
-                raise np.linalg.LinAlgError("nearly singular")
-        except np.linalg.LinAlgError:
+        root, info = dpotrf(p / np.outer(scale, scale), lower=1, clean=0)
+        if info != 0 or float(np.diagonal(root).min()) ** 2 < CORRELATION_FLOOR:
             p = repair_covariance(p, self._floor)
         return p
 
@@ -350,7 +385,9 @@ class JamHypotheses:
         """Prune hypotheses below the probability floor (never the most likely one)."""
         floor = math.log(max(self._params.filter.min_hypothesis_probability, 1e-300))
         best = max(self.hypotheses, key=lambda h: h.log_prob)
-        self.hypotheses = [h for h in self.hypotheses if h.log_prob >= floor or h is best]
+        kept = [h for h in self.hypotheses if h.log_prob >= floor or h is best]
+        self._spare_filters += [h.filter for h in self.hypotheses if h not in kept]
+        self.hypotheses = kept
         self._normalise()
 
     def restore(self, states: list[tuple[int, bool, FloatArray, FloatArray, float]]) -> None:
