@@ -11,7 +11,8 @@ keep ``PUBLISHER_DEPTH`` messages.
 ``/clock`` if published) has a subscriber (at most that long; error otherwise), then
 :data:`SETTLE_S` more so that the subscriber side of discovery completes too: a best-effort
 subscriber drops what arrives before it has matched the publisher. At the end the player
-waits for reliable subscribers to acknowledge everything, so a short bag is not cut off.
+waits for reliable subscribers to acknowledge everything (up to Fast DDS's heartbeat period,
+3 s), so a short bag is not cut off; best-effort subscribers are not waited for.
 """
 
 from __future__ import annotations
@@ -107,6 +108,14 @@ def _wait_for_subscribers(
     stop.wait(SETTLE_S)
 
 
+def _has_reliable_subscriber(node: Any, topic: str) -> bool:
+    """Some subscriber of ``topic`` is reliable (a best-effort one acknowledges nothing)."""
+    return any(
+        info.qos_profile.reliability == QoSReliabilityPolicy.RELIABLE
+        for info in node.get_subscriptions_info_by_topic(topic)
+    )
+
+
 def play(bag: Path, options: PlayOptions, stop: threading.Event) -> PlayReport:
     """Play ``bag`` (rclpy must be initialised) until its end, or until ``stop`` is set."""
     try:
@@ -150,8 +159,9 @@ def _play(reader: Reader, options: PlayOptions, stop: threading.Event) -> PlayRe
             if not options.loop:
                 break
         report.interrupted = stop.is_set()
-        for publisher in publishers.values():
-            publisher.wait_for_all_acked(Duration(seconds=ACK_TIMEOUT_S))
+        for topic, publisher in publishers.items():
+            if _has_reliable_subscriber(node, topic):
+                publisher.wait_for_all_acked(Duration(seconds=ACK_TIMEOUT_S))
         return report
     finally:
         node.destroy_node()

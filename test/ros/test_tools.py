@@ -2,15 +2,21 @@
 
 from __future__ import annotations
 
+import re
+import signal
 import subprocess
 import sys
 from pathlib import Path
 
 import pytest
+from prsm_health_msgs.msg import MotorState
+from rclpy.qos import QoSProfile, QoSReliabilityPolicy
 
 from prsm_health.outputs import Level
+from prsm_health.ros.messages import stamp_seconds
 from prsm_health.ros.monitor import table
 from test.ros.data import short_jam_scene, simulated_bag, synthetic_run, write_bag
+from test.ros.harness import Listener, start_player, stop_process
 
 
 def cli(*args: str, timeout_s: float = 60.0) -> subprocess.CompletedProcess[str]:
@@ -44,6 +50,31 @@ def test_play_publishes_every_message(tmp_path: Path) -> None:
     done = cli("play", str(bag), "--rate", "5", "--clock")
     assert done.returncode == 0, done.stderr
     assert "play done: /motor_state 500 published in 1 pass(es)" in done.stdout
+
+
+def test_play_loops_until_interrupted(ros: None, tmp_path: Path) -> None:
+    bag = write_bag(tmp_path / "bag", synthetic_run(0.2))
+    listener = Listener()
+    received: list[float] = []
+    qos = QoSProfile(depth=1000, reliability=QoSReliabilityPolicy.RELIABLE)
+    listener.node.create_subscription(
+        MotorState, "/motor_state", lambda m: received.append(stamp_seconds(m.header.stamp)), qos
+    )
+    player = start_player(bag, "--loop", "--rate", "4")
+    try:
+        listener.wait_for(lambda: len(received) >= 600, 30.0, "three passes")
+        player.send_signal(signal.SIGINT)
+        out, _ = player.communicate(timeout=20)
+    finally:
+        stop_process(player)
+        listener.close()
+    assert player.returncode == 0
+    match = re.search(r"play interrupted: /motor_state (\d+) published in (\d+) pass", out)
+    assert match, out
+    published, passes = int(match[1]), int(match[2])
+    assert passes >= 3
+    assert 200 * (passes - 1) <= published <= 200 * passes
+    assert received[:200] == received[200:400]  # the same stamps again: a loop, not a shift
 
 
 def test_monitor_times_out_without_a_node() -> None:
