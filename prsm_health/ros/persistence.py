@@ -94,9 +94,7 @@ class StateStore:
             document = json.loads(text)
             snapshot = self._snapshot(document)
             estimator.restore(snapshot)
-        # JSONDecodeError and SnapshotError are ValueErrors; HealthEstimator.restore lets an
-        # AttributeError through for a list where it expects a mapping.
-        except (ValueError, AttributeError) as exc:
+        except ValueError as exc:  # JSONDecodeError and SnapshotError are ValueErrors
             return self._keep_aside(f"unusable state file {self.path}: {exc}")
         return RestoreOutcome(restored=True)
 
