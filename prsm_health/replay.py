@@ -39,19 +39,17 @@ from prsm_health.bags import (
     write_motor_states,
 )
 from prsm_health.bags.stamps import seconds_to_stamps
+from prsm_health.bags.topics import DIAGNOSTICS_TOPIC, HEALTH_TOPIC
 from prsm_health.bags.typestore import typestore
 from prsm_health.estimation.estimate import HealthState
 from prsm_health.estimation.estimator import HealthEstimator
 from prsm_health.estimation.inputs import InputCounters
 from prsm_health.estimation.metrics import Metrics, score
 from prsm_health.estimation.params import EstimatorParams
-from prsm_health.outputs import DiagnosticStatusData, diagnostic_statuses, health_estimate_fields
+from prsm_health.outputs import DiagnosticStatusData, health_estimate_fields
 from prsm_health.signals import MotorSamples, TruthSamples
-from prsm_health.tracking import EventTracker, InputTracker, rejected_by_reason
+from prsm_health.tracking import DiagnosticsTracker, rejected_by_reason
 
-#: Topics of the replay's output bag (the node's, with the node named prsm_health).
-HEALTH_TOPIC = "/prsm_health/health"
-DIAGNOSTICS_TOPIC = "/diagnostics"
 #: Diagnostics are written once per this many seconds of bag time.
 DIAGNOSTICS_PERIOD_S = 1.0
 #: Samples read per chunk.
@@ -172,8 +170,7 @@ class _Output:
         self._writer = BagWriter(path)
         self._params = params
         self._hardware_id = hardware_id
-        self._inputs = InputTracker()
-        self._events = EventTracker()
+        self._diagnostics = DiagnosticsTracker()
         self._latest: HealthState | None = None
         self._next_diagnostics_s: float | None = None
         types = typestore().types
@@ -219,24 +216,16 @@ class _Output:
             return
         received = len(samples) if samples is not None else 0
         rejected = rejected_by_reason(counters, {})
-        self._inputs.update(now, received, counters.accepted, rejected)
-        self._events.observe(now, states, counters)
-        self._events.non_finite(now, replaced)
+        self._diagnostics.inputs.update(now, received, counters.accepted, rejected)
+        self._diagnostics.events.observe(now, states, counters)
+        self._diagnostics.events.non_finite(now, replaced)
         self._latest = states[-1]
         if self._next_diagnostics_s is None or now >= self._next_diagnostics_s:
             self._write_diagnostics(now)
             self._next_diagnostics_s = now + DIAGNOSTICS_PERIOD_S
 
     def _write_diagnostics(self, now_s: float) -> None:
-        statuses = diagnostic_statuses(
-            self._latest,
-            self._inputs.health(now_s),
-            self._params.diagnostics,
-            self._params.rated_load_n,
-            self._hardware_id,
-            now_s,
-            self._events.events(),
-        )
+        statuses = self._diagnostics.statuses(self._latest, self._params, self._hardware_id, now_s)
         message = self._array(
             header=self._header(stamp=self._stamp(now_s), frame_id=""),
             status=[self._status_message(s) for s in statuses],

@@ -22,7 +22,6 @@ from prsm_health.bags.bagfiles import bag_files
 from prsm_health.estimation.estimate import UM_PER_M
 from prsm_health.estimation.params import EstimatorParams, bundled_params_file, params_from_mapping
 from prsm_health.replay import ReplayResult, replay
-from prsm_health.report import write_report
 from prsm_health.scenes.scene import load_scene, scene_names
 from prsm_health.yamlio import YamlError, load_yaml_mapping
 
@@ -93,6 +92,8 @@ def run_replay(args: argparse.Namespace) -> int:
     if args.metrics_json is not None and result.metrics is not None:
         args.metrics_json.write_text(json.dumps(result.metrics.to_dict(), indent=2) + "\n")
     if args.report is not None and result.states:
+        from prsm_health.report import write_report  # matplotlib: only when a report is asked
+
         write_report(args.report, result.states, result.truth, result.metrics, title=args.bag.name)
     return 1 if result.damage is not None else 0
 

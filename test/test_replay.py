@@ -14,10 +14,11 @@ from mcap_ros2.reader import read_ros2_messages
 from rosbags.rosbag2 import Reader
 
 from prsm_health.bags import InputTopics
+from prsm_health.bags.topics import DIAGNOSTICS_TOPIC, HEALTH_TOPIC
 from prsm_health.bags.typestore import typestore
 from prsm_health.cli import main
 from prsm_health.estimation.params import EstimatorParams
-from prsm_health.replay import DIAGNOSTICS_TOPIC, HEALTH_TOPIC, replay
+from prsm_health.replay import replay
 from prsm_health.scenes.recording import record
 from prsm_health.scenes.scene import scene_from_mapping
 from prsm_health.scenes.simulator import Simulator

@@ -2,7 +2,8 @@
 
 ``/motor_state`` (prsm_health_msgs/MotorState) is the estimator's input, ``/joint_states``
 (sensor_msgs/JointState) the alternative input, ``/truth/state`` (prsm_health_msgs/GroundTruth)
-the simulator's ground truth, ``/prsm_health/estimate`` (HealthEstimate) and ``/diagnostics``
+the simulator's ground truth, ``/prsm_health/health`` (HealthEstimate, the node's ``~/health``)
+and ``/diagnostics``
 (diagnostic_msgs/DiagnosticArray) the estimator's outputs.
 """
 
@@ -11,7 +12,7 @@ from __future__ import annotations
 MOTOR_STATE_TOPIC = "/motor_state"
 JOINT_STATES_TOPIC = "/joint_states"
 TRUTH_TOPIC = "/truth/state"
-ESTIMATE_TOPIC = "/prsm_health/estimate"
+HEALTH_TOPIC = "/prsm_health/health"
 DIAGNOSTICS_TOPIC = "/diagnostics"
 
 #: Frame of MotorState headers, and name of the motor joint in JointState messages.
