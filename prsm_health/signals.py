@@ -38,7 +38,10 @@ class MotorSamples:
     position_rad: FloatArray
 
     def __post_init__(self) -> None:
-        _check_lengths(self)
+        # Direct (not through dataclasses.fields): the node builds one per few samples.
+        n = len(self.stamp_s)
+        if not len(self.current_a) == len(self.speed_rad_s) == len(self.position_rad) == n:
+            _check_lengths(self)
 
     def __len__(self) -> int:
         return len(self.stamp_s)
@@ -55,7 +58,12 @@ class MotorSamples:
     @classmethod
     def concatenate(cls, parts: list[MotorSamples]) -> MotorSamples:
         """One run from consecutive parts."""
-        return cls(*(np.concatenate([getattr(p, f.name) for p in parts]) for f in fields(cls)))
+        return cls(
+            np.concatenate([p.stamp_s for p in parts]),
+            np.concatenate([p.current_a for p in parts]),
+            np.concatenate([p.speed_rad_s for p in parts]),
+            np.concatenate([p.position_rad for p in parts]),
+        )
 
 
 @dataclass(frozen=True)

@@ -182,10 +182,12 @@ class SampleBlocker:
 
     def _in_range(self, samples: MotorSamples) -> BoolArray:
         """Finite and within the drive's current and speed range."""
-        values = np.stack(
-            [samples.stamp_s, samples.current_a, samples.speed_rad_s, samples.position_rad]
+        finite = (
+            np.isfinite(samples.stamp_s)
+            & np.isfinite(samples.current_a)
+            & np.isfinite(samples.speed_rad_s)
+            & np.isfinite(samples.position_rad)
         )
-        finite = np.isfinite(values).all(axis=0)
         with np.errstate(invalid="ignore"):
             in_range = (np.abs(samples.current_a) <= self._max_current) & (
                 np.abs(samples.speed_rad_s) <= self._max_speed
@@ -269,9 +271,12 @@ class SampleBlocker:
             return []
         period = self._params.filter.block_duration_s
         t = pending.stamp_s
-        gap_before = np.r_[False, np.diff(t) > self._params.filter.max_gap_s]
         if self._anchor is None:
             self._anchor = float(t[0])
+        if not final and self._no_block_yet(t, period):
+            self._pending = pending
+            return []
+        gap_before = np.r_[False, np.diff(t) > self._params.filter.max_gap_s]
         # A gap starts a new time grid anchored at the first sample after it.
         anchors = np.where(gap_before, t, np.nan)
         anchors[0] = self._anchor if not gap_before[0] else t[0]
@@ -297,6 +302,18 @@ class SampleBlocker:
         return self._summarise(
             run[keep], np.cumsum(new_cell[:end])[keep] - 1, gap_before[:end][keep]
         )
+
+    def _no_block_yet(self, t: FloatArray, period: float) -> bool:
+        """Cheap test (the node feeds a few samples at a time): the sample STUCK_RUN_SAMPLES
+        from the end is still in the first pending sample's cell, with no gap between."""
+        last = len(t) - STUCK_RUN_SAMPLES
+        if last < 1:
+            return True
+        first_t, last_t = float(t[0]), float(t[last])
+        if not 0.0 <= last_t - first_t <= self._params.filter.max_gap_s:
+            return False
+        anchor = self._anchor if self._anchor is not None else first_t
+        return math.floor((first_t - anchor) / period) == math.floor((last_t - anchor) / period)
 
     def _summarise(
         self, run: MotorSamples, cell_ids: NDArray[np.int64], gap_before: BoolArray
