@@ -22,6 +22,7 @@ from typing import Any, NoReturn
 
 from tqdm import tqdm
 
+from prsm_health.bench_command import add_bench_command
 from prsm_health.physics.errors import PhysicsError
 from prsm_health.physics.geometry import Misalignment
 from prsm_health.physics.load_distribution import LoadingCase
@@ -104,6 +105,7 @@ def _build_parser() -> _Parser:
     commands.add_parser("model-demo", help="model every bundled preset at its largest paper load")
     add_ros_commands(commands)
     add_replay_command(commands)
+    add_bench_command(commands)
     return parser
 
 

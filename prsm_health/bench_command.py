@@ -1,0 +1,65 @@
+"""``prsm-health bench``: the estimator benchmark (run time against error).
+
+``prsm-health bench [--quick] [--out DIR] [--scenes ...] [--configs ...]`` runs
+:func:`~prsm_health.benchmark.run_benchmark` on the full plan (about half an hour on 2 cores)
+or the CI-sized ``--quick`` one and writes ``results.json``, ``results.md`` and ``pareto.png``
+into ``--out`` (default ``build/bench``). The floors are printed (measured, pass/fail); the
+exit code does not depend on them. docs/performance.md explains the plan and the latest run.
+"""
+
+from __future__ import annotations
+
+import argparse
+import logging
+import sys
+from pathlib import Path
+from typing import Any
+
+from prsm_health.benchmark import (
+    CONFIGURATION_NAMES,
+    DEFAULT_BAGS,
+    full_plan,
+    quick_plan,
+    run_benchmark,
+    select,
+)
+from prsm_health.benchmark_report import write_results
+
+
+def add_bench_command(commands: Any) -> None:
+    """Register ``bench`` on the CLI's subparsers."""
+    parser = commands.add_parser("bench", help="benchmark the estimator: run time against error")
+    parser.add_argument("--quick", action="store_true", help="CI-sized run (under 2 minutes)")
+    parser.add_argument("--out", type=Path, default=Path("build/bench"), metavar="DIR")
+    parser.add_argument(
+        "--scenes",
+        nargs="+",
+        metavar="NAME",
+        help="scenes or groups (bags, long, two-jam, wear-prior) to run; default all",
+    )
+    parser.add_argument(
+        "--configs",
+        nargs="+",
+        metavar="NAME",
+        help=f"configurations to run ({', '.join(CONFIGURATION_NAMES)}); default all",
+    )
+    parser.add_argument("--bags", type=Path, default=DEFAULT_BAGS, metavar="DIR")
+    parser.set_defaults(handler=run_bench)
+
+
+def run_bench(args: argparse.Namespace) -> int:
+    """Run the planned benchmark, write the files, print the floors."""
+    if not logging.getLogger().handlers:
+        logging.basicConfig(level=logging.INFO, format="bench: %(message)s", stream=sys.stderr)
+    plan = quick_plan(args.bags) if args.quick else full_plan(args.bags)
+    missing = [str(s.bag) for s in plan.scenes if s.bag is not None and not s.bag.is_dir()]
+    if missing:
+        raise ValueError(f"--bags: no bag {', '.join(missing)} (make bags)")
+    plan = select(plan, scenes=args.scenes, configs=args.configs)
+    results = run_benchmark(plan)
+    floors = write_results(results, args.out)
+    print(f"{args.out}: results.json, results.md, pareto.png ({results.elapsed_s / 60:.1f} min)")
+    for floor in floors:
+        verdict = {True: "pass", False: "FAIL", None: "-"}[floor.passed]
+        print(f"  {verdict:4s}  {floor.name}: {floor.measured}")
+    return 0

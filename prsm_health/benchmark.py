@@ -1,0 +1,776 @@
+"""Benchmark of the health estimator: run time against error (``prsm-health bench``).
+
+Every named configuration (a :class:`~prsm_health.estimation.params.Fidelity`, from the naive
+reference with every skip off to the default) runs on the same scenes and is scored against
+the simulator's truth with :func:`~prsm_health.estimation.metrics.score`:
+
+- the bundled bags (``bags/``), replayed through :func:`~prsm_health.replay.replay` (reading
+  included), beside rosbags' bare decode time of the same bag
+  (:func:`~prsm_health.bags.baseline.decode_baseline`, the replay's floor);
+- generated runs, simulated in memory and fed to the estimator directly: ten minutes of the
+  nominal downhole cycle, one hour of it (default configuration only: the false-jam floor),
+  random two-jam runs whose jam onsets are put in categories from the truth (steady motion,
+  stroke end/low load, standstill: docs/estimation.md says they differ in identifiability),
+  and short accelerated-wear runs with the wear coefficient drawn from its prior;
+- the naive configuration (about 30 ms per sample on this machine) only on an excerpt, the
+  first ``naive_seconds`` of a few bags, where every configuration runs as well for a
+  consistent comparison.
+
+Time per sample is measured the way the node feeds samples: one ``process`` call per sample,
+each call timed (``timing_samples`` samples from the start of each run); the chunked
+throughput comes from the replay (bags) or chunked ``process`` calls (generated runs). The
+results (:class:`BenchResults`) are written as ``results.json``, ``results.md`` and
+``pareto.png`` by :mod:`prsm_health.benchmark_report`; the floors of issue 6 are evaluated
+there too (:func:`floors`), never asserted. docs/performance.md has the latest full run.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import logging
+import math
+import os
+import platform
+import time
+from collections.abc import Callable, Iterable
+from dataclasses import dataclass, field, fields
+from importlib import resources
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+from numpy.typing import NDArray
+
+from prsm_health.bags import InputTopics, decode_baseline, read_motor_samples, read_truth
+from prsm_health.estimation.estimate import HealthState
+from prsm_health.estimation.estimator import HealthEstimator
+from prsm_health.estimation.metrics import MOVING_FRACTION, Metrics, score
+from prsm_health.estimation.params import (
+    EstimatorParams,
+    Fidelity,
+    bundled_params_file,
+    params_from_mapping,
+)
+from prsm_health.replay import CHUNK_SAMPLES, replay
+from prsm_health.scenes.profiles import DownholeCycle
+from prsm_health.scenes.scene import Scene, scene_from_mapping
+from prsm_health.scenes.simulator import simulate
+from prsm_health.signals import MotorSamples, TruthSamples
+from prsm_health.yamlio import load_yaml_mapping
+
+LOG = logging.getLogger(__name__)
+
+RPM_TO_RAD_S = 2.0 * math.pi / 60.0
+#: The bundled bags of a source checkout (``--bags`` points elsewhere).
+DEFAULT_BAGS = Path(__file__).resolve().parents[1] / "bags"
+BAG_SCENES = (
+    "nominal-downhole",
+    "sudden-jam",
+    "radial-misalignment",
+    "stationary-hold",
+    "accelerated-wear",
+    "sensor-faults",
+)
+#: Bags whose first ``naive_seconds`` every configuration runs on, the naive one included.
+NAIVE_SCENES = ("nominal-downhole", "sudden-jam", "radial-misalignment")
+#: Scene groups (``--scenes`` takes a scene name or one of these).
+GROUPS = ("bags", "long", "two-jam", "wear-prior")
+#: Seeds of the generated runs (fixed: the same plan gives the same scenes).
+LONG_SEEDS = {"nominal-10min": 101, "nominal-1h": 102}
+TWO_JAM_SEED = 2026
+WEAR_PRIOR_SEED = 300
+#: A two-jam run's jams start at least this long before its end (one cycle is 18-25 s).
+JAM_MARGIN_S = 25.0
+#: A jam onset counts as steady motion above this fraction of its stroke's largest load.
+STEADY_LOAD_FRACTION = 0.5
+ONSET_CATEGORIES = ("steady motion", "stroke end/low load", "standstill")
+FloatArray = NDArray[np.float64]
+
+
+@dataclass(frozen=True)
+class Configuration:
+    """A named estimator configuration: its :class:`Fidelity` and what it changes."""
+
+    name: str
+    fidelity: Fidelity
+    description: str
+
+
+CONFIGURATIONS = (
+    Configuration(
+        "naive",
+        Fidelity(
+            surrogate=False,
+            filter="ukf",
+            prune_hypotheses=False,
+            skip_standstill=False,
+            merge_standstill_blocks=False,
+            radial_terms="on",
+        ),
+        "every skip off: physics core at every evaluation, UKF, all jam counts, no standstill "
+        "skips or merging, ripple states on",
+    ),
+    Configuration("default", Fidelity(), "the shipped configuration"),
+    Configuration("no-surrogate", Fidelity(surrogate=False), "physics core instead of tables"),
+    Configuration("no-prune", Fidelity(prune_hypotheses=False), "all 11 jam counts filtered"),
+    Configuration(
+        "no-skip-standstill", Fidelity(skip_standstill=False), "wear integrated at standstill"
+    ),
+    Configuration("no-merge", Fidelity(merge_standstill_blocks=False), "every standstill block"),
+    Configuration("radial-on", Fidelity(radial_terms="on"), "ripple states always"),
+    Configuration("radial-off", Fidelity(radial_terms="off"), "no ripple states"),
+    Configuration("ukf", Fidelity(filter="ukf"), "filterpy's unscented filter"),
+)
+CONFIGURATION_NAMES = tuple(c.name for c in CONFIGURATIONS)
+
+
+# --- scenes ---------------------------------------------------------------------------------
+@dataclass(frozen=True)
+class BenchScene:
+    """One scene of the plan: a bundled bag (``bag``) or a generated run (in memory).
+
+    group: one of GROUPS. configs: the configurations that run on it (None: all but naive).
+    """
+
+    name: str
+    group: str
+    scene: Scene
+    bag: Path | None = None
+    configs: tuple[str, ...] | None = None
+
+    def runs(self, config: str) -> bool:
+        """Whether ``config`` runs on the whole of this scene."""
+        if self.configs is None:
+            return config != "naive"
+        return config in self.configs
+
+
+def _bundled_mapping(name: str) -> dict[str, Any]:
+    """The parsed YAML of a bundled scene (a fresh dict to modify)."""
+    path = Path(str(resources.files("prsm_health.scenes") / "data" / f"{name}.yaml"))
+    return load_yaml_mapping(path)
+
+
+def _generated(name: str, base: str, **changes: Any) -> Scene:
+    """A bundled scene with its name and some keys changed."""
+    mapping = _bundled_mapping(base)
+    mapping.update(name=name, **changes)
+    return scene_from_mapping(mapping)
+
+
+def two_jam_scenes(count: int, *, seed: int = TWO_JAM_SEED) -> list[Scene]:
+    """``count`` nominal downhole runs of 40-60 s with two jams of distinct rollers at random
+    times, at least 2 s apart and JAM_MARGIN_S before the end (so a cycle follows each)."""
+    rng = np.random.default_rng(seed)
+    scenes = []
+    for i in range(count):
+        duration = round(float(rng.uniform(40.0, 60.0)), 1)
+        while True:
+            times = np.sort(rng.uniform(2.0, duration - JAM_MARGIN_S, 2))
+            if times[1] - times[0] >= 2.0:
+                break
+        rollers = rng.choice(10, size=2, replace=False) + 1
+        jams = [
+            {"time_s": round(float(t), 3), "roller": int(r)}
+            for t, r in zip(times, rollers, strict=True)
+        ]
+        scenes.append(
+            _generated(
+                f"two-jam-{i + 1}",
+                "nominal-downhole",
+                duration_s=duration,
+                seed=seed + i,
+                jams=jams,
+            )
+        )
+    return scenes
+
+
+def wear_prior_scenes(count: int, duration_s: float, *, seed: int = WEAR_PRIOR_SEED) -> list[Scene]:
+    """Accelerated-wear runs with the wear coefficient drawn from the prior (sigma_ln 0.5)."""
+    return [
+        _generated(
+            f"wear-prior-{i + 1}",
+            "accelerated-wear",
+            duration_s=duration_s,
+            seed=seed + i,
+            wear={"prior_sigma_ln": 0.5},
+        )
+        for i in range(count)
+    ]
+
+
+def cycle_period_s(scene: Scene) -> float | None:
+    """Mean length of the downhole cycles of ``scene`` (one motion cycle: forward stroke,
+    two support steps, reverse stroke, three support steps), or None for other profiles."""
+    profile = scene.profile
+    if not isinstance(profile, DownholeCycle):
+        return None
+    lead = scene.actuator.preset.geometry.lead_m
+    segments = profile.segments(scene.duration_s, lead, scene.seed)
+    forward = segments.direction > 0
+    ends = segments.start_s[~forward] + segments.duration_s[~forward] + 3.0 * profile.support_s
+    return float(np.mean(ends - segments.start_s[forward]))
+
+
+# --- the plan -------------------------------------------------------------------------------
+@dataclass(frozen=True)
+class Plan:
+    """What one benchmark run does (:func:`full_plan`, :func:`quick_plan`, :func:`select`).
+
+    timing_samples: samples timed one call each per (configuration, scene). naive_scenes,
+    naive_seconds: the excerpt. repeats: runs of the default replay and of the decode
+    baseline per bag (the best counts). wear_bag: the accelerated-wear bag for the run with
+    the true wear factor (None: not run). wear_prior: its runs (default configuration).
+    """
+
+    mode: str
+    scenes: tuple[BenchScene, ...]
+    configs: tuple[Configuration, ...]
+    timing_samples: int
+    naive_scenes: tuple[str, ...]
+    naive_seconds: float
+    repeats: int
+    wear_bag: Path | None
+    wear_prior: tuple[Scene, ...]
+
+
+def _bag_scenes(bags: Path, names: Iterable[str]) -> list[BenchScene]:
+    return [
+        BenchScene(name, "bags", scene_from_mapping(_bundled_mapping(name)), bag=bags / name)
+        for name in names
+    ]
+
+
+def full_plan(bags: Path = DEFAULT_BAGS) -> Plan:
+    """Every configuration on every scene of issue 6 (about half an hour on 2 cores)."""
+    long = [
+        BenchScene(
+            "nominal-10min",
+            "long",
+            _generated("nominal-10min", "nominal-downhole", duration_s=600.0, seed=101),
+        ),
+        BenchScene(
+            "nominal-1h",
+            "long",
+            _generated("nominal-1h", "nominal-downhole", duration_s=3600.0, seed=102),
+            configs=("default",),
+        ),
+    ]
+    two_jam = [BenchScene(s.name, "two-jam", s) for s in two_jam_scenes(8)]
+    return Plan(
+        mode="full",
+        scenes=(*_bag_scenes(bags, BAG_SCENES), *long, *two_jam),
+        configs=CONFIGURATIONS,
+        timing_samples=20_000,
+        naive_scenes=NAIVE_SCENES,
+        naive_seconds=6.0,
+        repeats=3,
+        wear_bag=bags / "accelerated-wear",
+        wear_prior=tuple(wear_prior_scenes(20, 30.0)),
+    )
+
+
+def quick_plan(bags: Path = DEFAULT_BAGS) -> Plan:
+    """A CI-sized run (well under 2 minutes): one bag, one two-jam run, three configurations,
+    3,000 per-sample timings (2 s at rest, 1 s of stroke), three short wear-prior runs; no
+    naive excerpt."""
+    keep = {"default", "ukf", "no-prune"}
+    return Plan(
+        mode="quick",
+        scenes=(
+            *_bag_scenes(bags, ["sudden-jam"]),
+            BenchScene("two-jam-1", "two-jam", two_jam_scenes(1)[0]),
+        ),
+        configs=tuple(c for c in CONFIGURATIONS if c.name in keep),
+        timing_samples=3000,
+        naive_scenes=(),
+        naive_seconds=0.0,
+        repeats=1,
+        wear_bag=bags / "accelerated-wear",
+        wear_prior=tuple(wear_prior_scenes(3, 10.0)),
+    )
+
+
+def select(plan: Plan, *, scenes: list[str] | None, configs: list[str] | None) -> Plan:
+    """The plan restricted to some scenes (names or GROUPS) and configurations (names).
+
+    Raises:
+        ValueError: an unknown scene, group or configuration name.
+    """
+    chosen_configs = plan.configs
+    if configs is not None:
+        unknown = sorted(set(configs) - set(CONFIGURATION_NAMES))
+        if unknown:
+            raise ValueError(
+                f"--configs: unknown {', '.join(unknown)}; one of {', '.join(CONFIGURATION_NAMES)}"
+            )
+        chosen_configs = tuple(c for c in CONFIGURATIONS if c.name in configs)
+    if scenes is None:
+        return dataclasses.replace(plan, configs=chosen_configs)
+    names = {s.name for s in plan.scenes} | set(GROUPS)
+    unknown = sorted(set(scenes) - names)
+    if unknown:
+        raise ValueError(
+            f"--scenes: unknown {', '.join(unknown)} in the {plan.mode} plan; one of "
+            f"{', '.join(sorted(names))}"
+        )
+    wanted = set(scenes)
+    return dataclasses.replace(
+        plan,
+        configs=chosen_configs,
+        scenes=tuple(s for s in plan.scenes if s.name in wanted or s.group in wanted),
+        naive_scenes=tuple(n for n in plan.naive_scenes if n in wanted or "bags" in wanted),
+        wear_bag=plan.wear_bag if wanted & {"accelerated-wear", "bags"} else None,
+        wear_prior=plan.wear_prior if "wear-prior" in wanted else (),
+    )
+
+
+# --- measurements ---------------------------------------------------------------------------
+@dataclass(frozen=True)
+class Timing:
+    """Cost of ``process`` called with one sample at a time (how the node feeds samples).
+
+    Most calls only queue the sample; one in about 40 completes a block and runs the filter,
+    so the median is the queueing cost, p99 and max the block updates, the mean the total.
+    """
+
+    calls: int
+    median_us: float
+    p99_us: float
+    mean_us: float
+    max_us: float
+
+    @classmethod
+    def of(cls, durations_ns: NDArray[np.int64]) -> Timing:
+        """Statistics of per-call durations [ns]."""
+        us = durations_ns.astype(np.float64) / 1e3
+        return cls(
+            calls=len(us),
+            median_us=float(np.median(us)),
+            p99_us=float(np.percentile(us, 99)),
+            mean_us=float(us.mean()),
+            max_us=float(us.max()),
+        )
+
+
+@dataclass(frozen=True)
+class Run:
+    """One configuration on one scene (``kind`` "full") or on its naive excerpt ("excerpt").
+
+    samples: samples estimated. chunked_s: wall time of the chunked run (bags: the replay,
+    reading included; best of ``repeats`` for the default); None for excerpt runs, which run
+    one call per sample only. timing: the per-call costs (the first ``timing_samples`` of a
+    full run; the whole excerpt). decode_s: rosbags' decode time of the bag (best of repeats).
+    metrics: :func:`score` against the truth. largest_load_n: the preset's largest paper load
+    (the RMSE floor's reference).
+    """
+
+    scene: str
+    group: str
+    config: str
+    kind: str
+    samples: int
+    estimates: int
+    chunked_s: float | None
+    timing: Timing
+    decode_s: float | None
+    metrics: Metrics
+    largest_load_n: float
+    durations_ns: NDArray[np.int64] = field(repr=False, compare=False)
+
+    @property
+    def samples_per_s(self) -> float | None:
+        """Chunked throughput."""
+        return self.samples / self.chunked_s if self.chunked_s else None
+
+    @property
+    def replay_over_decode(self) -> float | None:
+        """Replay time over the bare decode time (bags)."""
+        if self.chunked_s is None or not self.decode_s:
+            return None
+        return self.chunked_s / self.decode_s
+
+    @property
+    def rmse_percent_largest(self) -> float:
+        """Load RMSE while moving, % of the largest paper load."""
+        return 100.0 * self.metrics.load_rmse_n / self.largest_load_n
+
+
+@dataclass(frozen=True)
+class JamOnset:
+    """A true jam onset of a run, its category from the truth and when it was identified.
+
+    count: the jam count it starts (1 = first jam). cycle_s: the run's motion cycle.
+    """
+
+    scene: str
+    config: str
+    onset_s: float
+    count: int
+    category: str
+    delay_s: float | None
+    cycle_s: float | None
+
+    @property
+    def within_cycle(self) -> bool:
+        """Identified within one motion cycle of its onset."""
+        return (
+            self.delay_s is not None and self.cycle_s is not None and self.delay_s <= self.cycle_s
+        )
+
+
+@dataclass(frozen=True)
+class WearRun:
+    """A wear run: the scene's true wear factor, the estimator's, and the precision-loss scores."""
+
+    scene: str
+    true_factor: float
+    estimator_factor: float
+    estimates: int
+    final_error_percent: float
+    coverage_2sigma: float
+    truth_final_um: float
+
+
+@dataclass(frozen=True)
+class BenchResults:
+    """Everything one benchmark run measured."""
+
+    mode: str
+    machine: dict[str, Any]
+    plan: dict[str, Any]
+    skipped_configs: dict[str, str]
+    runs: list[Run]
+    jam_onsets: list[JamOnset]
+    wear_true_factor: WearRun | None
+    wear_prior: list[WearRun]
+    elapsed_s: float
+
+    def runs_of(self, *, kind: str = "full", config: str | None = None) -> list[Run]:
+        """The runs of one kind (and configuration)."""
+        return [r for r in self.runs if r.kind == kind and config in (None, r.config)]
+
+
+def base_params() -> EstimatorParams:
+    """The bundled estimator parameters (config/default.yaml)."""
+    return params_from_mapping(load_yaml_mapping(bundled_params_file()))
+
+
+def params_for(
+    scene: Scene, fidelity: Fidelity, *, wear_factor: float | None = None
+) -> EstimatorParams:
+    """The bundled parameters with the scene's actuator (as ``prsm-health replay`` takes a
+    bundled scene's) and ``fidelity``; optionally a calibrated wear-coefficient factor."""
+    params = base_params()
+    model = params.model
+    if wear_factor is not None:
+        model = dataclasses.replace(model, wear_coefficient_factor=wear_factor)
+    return dataclasses.replace(params, actuator=scene.actuator, fidelity=fidelity, model=model)
+
+
+def _effective(params: EstimatorParams) -> tuple[Any, ...]:
+    """The fidelity as it acts: radial_terms resolved to on or off."""
+    values = dataclasses.asdict(params.fidelity)
+    values["radial_terms"] = params.radial_terms
+    return tuple(sorted(values.items()))
+
+
+def skipped_configurations(configs: Iterable[Configuration]) -> dict[str, str]:
+    """Configurations that act exactly like the default with the bundled parameters
+    (``radial-on`` while "auto" resolves to on), with the reason."""
+    scene = scene_from_mapping(_bundled_mapping("nominal-downhole"))
+    default = _effective(params_for(scene, Fidelity()))
+    return {
+        c.name: "acts exactly as default (radial_terms auto resolves to the same)"
+        for c in configs
+        if c.name != "default" and _effective(params_for(scene, c.fidelity)) == default
+    }
+
+
+def one_at_a_time(
+    params: EstimatorParams, samples: MotorSamples, *, keep: bool = False
+) -> tuple[NDArray[np.int64], list[HealthState]]:
+    """Feed ``samples`` one ``process`` call each and time every call [ns]; with ``keep`` the
+    estimates (and those of ``finish``) are returned too."""
+    estimator = HealthEstimator(params)
+    durations = np.empty(len(samples), dtype=np.int64)
+    states: list[HealthState] = []
+    clock = time.perf_counter_ns
+    for i in range(len(samples)):
+        one = samples[i : i + 1]
+        start = clock()
+        new = estimator.process(one)
+        durations[i] = clock() - start
+        if keep:
+            states += new
+    if keep:
+        states += estimator.finish()
+    return durations, states
+
+
+def chunked(params: EstimatorParams, samples: MotorSamples) -> tuple[list[HealthState], float]:
+    """The estimates of ``samples`` fed in chunks of the replay's size, and the wall time of
+    the ``process`` and ``finish`` calls."""
+    estimator = HealthEstimator(params)
+    states: list[HealthState] = []
+    elapsed = 0.0
+    for begin in range(0, len(samples), CHUNK_SAMPLES):
+        piece = samples[begin : begin + CHUNK_SAMPLES]
+        start = time.perf_counter()
+        states += estimator.process(piece)
+        elapsed += time.perf_counter() - start
+    start = time.perf_counter()
+    states += estimator.finish()
+    return states, elapsed + time.perf_counter() - start
+
+
+def scored(states: list[HealthState], truth: TruthSamples, params: EstimatorParams) -> Metrics:
+    """:func:`score` with the parameters' rated load and the preset's largest speed."""
+    preset = params.actuator.preset
+    return score(
+        states,
+        truth,
+        rated_load_n=params.rated_load_n,
+        largest_screw_speed_rad_s=preset.largest_speed_rpm * RPM_TO_RAD_S,
+    )
+
+
+def truth_until(truth: TruthSamples, end_s: float) -> TruthSamples:
+    """The truth samples stamped at or before ``end_s``."""
+    keep = truth.stamp_s <= end_s
+    return TruthSamples(*(getattr(truth, f.name)[keep] for f in fields(TruthSamples)))
+
+
+def onset_category(truth: TruthSamples, onset_s: float, moving_speed_rad_s: float) -> str:
+    """Where a jam started, from the truth (ONSET_CATEGORIES): at standstill; in steady
+    motion (the load at least STEADY_LOAD_FRACTION of its stroke's largest); otherwise at a
+    stroke end or start, where the load is low."""
+    moving = np.abs(truth.screw_speed_rad_s) > moving_speed_rad_s
+    index = min(int(np.searchsorted(truth.stamp_s, onset_s)), len(truth) - 1)
+    if not moving[index]:
+        return "standstill"
+    edges = np.flatnonzero(np.diff(moving.astype(np.int8))) + 1
+    begin = int(edges[edges <= index].max()) if np.any(edges <= index) else 0
+    end = int(edges[edges > index].min()) if np.any(edges > index) else len(truth)
+    load = np.abs(truth.axial_load_n)
+    if load[index] >= STEADY_LOAD_FRACTION * float(load[begin:end].max()):
+        return "steady motion"
+    return "stroke end/low load"
+
+
+def jam_onsets(
+    run: Run, truth: TruthSamples, cycle_s: float | None, params: EstimatorParams
+) -> list[JamOnset]:
+    """The run's true jam onsets with their category and detection delay."""
+    moving = MOVING_FRACTION * params.actuator.preset.largest_speed_rpm * RPM_TO_RAD_S
+    return [
+        JamOnset(
+            scene=run.scene,
+            config=run.config,
+            onset_s=jam.onset_s,
+            count=jam.count,
+            category=onset_category(truth, jam.onset_s, moving),
+            delay_s=jam.delay_s,
+            cycle_s=cycle_s,
+        )
+        for jam in run.metrics.jams
+    ]
+
+
+# --- running --------------------------------------------------------------------------------
+class _Bench:
+    """Runs a :class:`Plan` and collects :class:`BenchResults`."""
+
+    def __init__(self, plan: Plan, progress: Callable[[str], None]) -> None:
+        self.plan = plan
+        self.progress = progress
+        self.skipped = skipped_configurations(plan.configs)
+        self.configs = [c for c in plan.configs if c.name not in self.skipped]
+        self.runs: list[Run] = []
+        self.onsets: list[JamOnset] = []
+
+    def _full_run(
+        self,
+        scene: BenchScene,
+        config: Configuration,
+        samples: MotorSamples,
+        truth: TruthSamples,
+        decode_s: float | None,
+    ) -> Run:
+        params = params_for(scene.scene, config.fidelity)
+        if scene.bag is not None:
+            repeats = self.plan.repeats if config.name == "default" else 1
+            results = [replay(scene.bag, params) for _ in range(repeats)]
+            states, elapsed = results[0].states, min(r.elapsed_s for r in results)
+        else:
+            states, elapsed = chunked(params, samples)
+        durations, _ = one_at_a_time(params, samples[: self.plan.timing_samples])
+        run = _run(scene, config, "full", params, len(samples), states, truth, durations)
+        run = dataclasses.replace(run, chunked_s=elapsed, decode_s=decode_s)
+        self.onsets += jam_onsets(run, truth, cycle_period_s(scene.scene), params)
+        return run
+
+    def _excerpt_run(
+        self, scene: BenchScene, config: Configuration, samples: MotorSamples, truth: TruthSamples
+    ) -> Run:
+        params = params_for(scene.scene, config.fidelity)
+        durations, states = one_at_a_time(params, samples, keep=True)
+        return _run(scene, config, "excerpt", params, len(samples), states, truth, durations)
+
+    def _data(self, scene: BenchScene) -> tuple[MotorSamples, TruthSamples, float | None]:
+        """The scene's samples and truth (read or simulated) and its decode baseline."""
+        if scene.bag is None:
+            result = simulate(scene.scene)
+            return result.motor, result.truth, None
+        decode = min(decode_baseline(scene.bag).seconds for _ in range(self.plan.repeats))
+        return read_motor_samples(scene.bag, InputTopics()), _truth(scene.bag), decode
+
+    def scene(self, scene: BenchScene) -> None:
+        """Every planned run on one scene."""
+        started = time.perf_counter()
+        samples, truth, decode = self._data(scene)
+        for config in self.configs:
+            if scene.runs(config.name):
+                begin = time.perf_counter()
+                self.runs.append(self._full_run(scene, config, samples, truth, decode))
+                self.progress(f"{scene.name} x {config.name}: {time.perf_counter() - begin:.1f} s")
+        if scene.name in self.plan.naive_scenes:
+            excerpt = min(round(self.plan.naive_seconds * scene.scene.rate_hz), len(samples))
+            cut = truth_until(truth, float(samples.stamp_s[excerpt - 1]))
+            for config in self.configs:
+                begin = time.perf_counter()
+                self.runs.append(self._excerpt_run(scene, config, samples[:excerpt], cut))
+                self.progress(
+                    f"{scene.name} first {self.plan.naive_seconds:g} s x {config.name}: "
+                    f"{time.perf_counter() - begin:.1f} s"
+                )
+        self.progress(f"{scene.name}: done in {time.perf_counter() - started:.1f} s")
+
+    def wear_true_factor(self, bag: Path) -> WearRun:
+        """accelerated-wear with the estimator told the scene's true wear factor."""
+        truth = _truth(bag)
+        factor = float(truth.wear_coefficient_factor[0])
+        scene = scene_from_mapping(_bundled_mapping(bag.name))
+        params = params_for(scene, Fidelity(), wear_factor=factor)
+        return _wear_run(
+            bag.name, factor, factor, scored(replay(bag, params).states, truth, params)
+        )
+
+    def wear_prior(self, scenes: Iterable[Scene]) -> list[WearRun]:
+        """Runs whose wear factor is drawn from the prior, the estimator's left at 1."""
+        found = []
+        for scene in scenes:
+            result = simulate(scene)
+            params = params_for(scene, Fidelity())
+            states, _ = chunked(params, result.motor)
+            metrics = scored(states, result.truth, params)
+            factor = float(result.truth.wear_coefficient_factor[0])
+            found.append(
+                _wear_run(scene.name, factor, params.model.wear_coefficient_factor, metrics)
+            )
+        self.progress(f"wear prior: {len(found)} runs")
+        return found
+
+
+def _run(
+    scene: BenchScene,
+    config: Configuration,
+    kind: str,
+    params: EstimatorParams,
+    samples: int,
+    states: list[HealthState],
+    truth: TruthSamples,
+    durations: NDArray[np.int64],
+) -> Run:
+    """A :class:`Run` without chunked or decode times, scored against ``truth``."""
+    return Run(
+        scene=scene.name,
+        group=scene.group,
+        config=config.name,
+        kind=kind,
+        samples=samples,
+        estimates=len(states),
+        chunked_s=None,
+        timing=Timing.of(durations),
+        decode_s=None,
+        metrics=scored(states, truth, params),
+        largest_load_n=params.actuator.preset.largest_axial_load_n,
+        durations_ns=durations,
+    )
+
+
+def _truth(bag: Path) -> TruthSamples:
+    """The bag's ground truth (the benchmark scores against it: it must be there)."""
+    truth = read_truth(bag)
+    if truth is None or len(truth) == 0:
+        raise ValueError(f"{bag}: no ground truth (/truth/state) to score against")
+    return truth
+
+
+def _wear_run(name: str, true_factor: float, estimator_factor: float, metrics: Metrics) -> WearRun:
+    return WearRun(
+        scene=name,
+        true_factor=true_factor,
+        estimator_factor=estimator_factor,
+        estimates=metrics.estimates,
+        final_error_percent=metrics.precision_loss_error_percent,
+        coverage_2sigma=metrics.precision_loss_coverage_2sigma,
+        truth_final_um=metrics.precision_loss_truth_final_m * 1e6,
+    )
+
+
+def machine() -> dict[str, Any]:
+    """Where the benchmark ran."""
+    return {
+        "python": platform.python_version(),
+        "machine": platform.machine(),
+        "processor": platform.processor(),
+        "cpus": os.cpu_count(),
+        "load_average_1min_at_start": os.getloadavg()[0],
+    }
+
+
+def run_benchmark(plan: Plan, *, progress: Callable[[str], None] = LOG.info) -> BenchResults:
+    """Run ``plan`` (see the module docstring)."""
+    started = time.perf_counter()
+    load = machine()
+    bench = _Bench(plan, progress)
+    for scene in plan.scenes:
+        bench.scene(scene)
+    true_factor = bench.wear_true_factor(plan.wear_bag) if plan.wear_bag is not None else None
+    prior = bench.wear_prior(plan.wear_prior)
+    return BenchResults(
+        mode=plan.mode,
+        machine=load,
+        plan={
+            "timing_samples": plan.timing_samples,
+            "naive_scenes": list(plan.naive_scenes),
+            "naive_seconds": plan.naive_seconds,
+            "repeats": plan.repeats,
+            "scenes": [
+                {
+                    "name": s.name,
+                    "group": s.group,
+                    "duration_s": s.scene.duration_s,
+                    "seed": s.scene.seed,
+                    "jams": [dataclasses.asdict(j) for j in s.scene.jams],
+                    "cycle_s": cycle_period_s(s.scene),
+                    "configs": list(s.configs) if s.configs is not None else "all but naive",
+                }
+                for s in plan.scenes
+            ],
+            "configurations": {
+                c.name: {"description": c.description, **dataclasses.asdict(c.fidelity)}
+                for c in plan.configs
+            },
+            "wear_prior_runs": len(plan.wear_prior),
+            "wear_prior_seconds": plan.wear_prior[0].duration_s if plan.wear_prior else None,
+        },
+        skipped_configs=bench.skipped,
+        runs=bench.runs,
+        jam_onsets=bench.onsets,
+        wear_true_factor=true_factor,
+        wear_prior=prior,
+        elapsed_s=time.perf_counter() - started,
+    )

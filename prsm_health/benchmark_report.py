@@ -1,0 +1,639 @@
+"""The benchmark's floors and files: ``results.json``, ``results.md``, ``pareto.png``.
+
+:func:`floors` evaluates the floors of issue 6 on a :class:`~prsm_health.benchmark.BenchResults`
+(measured value and pass/fail; a floor whose runs were not part of the plan is "not
+measured"); :func:`write_results` writes the three files. Nothing here asserts: a failing
+floor is reported, and the run still succeeds.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import json
+import math
+from collections.abc import Callable, Iterable
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from prsm_health.benchmark import (
+    BAG_SCENES,
+    ONSET_CATEGORIES,
+    BenchResults,
+    JamOnset,
+    Run,
+    Timing,
+    WearRun,
+)
+
+#: The floors' thresholds (issue 6).
+NAIVE_SPEEDUP = 50.0
+NAIVE_EXTRA_RMSE_PERCENT = 0.5
+MEDIAN_COST_US = 50.0
+REPLAY_OVER_DECODE = 2.0
+RMSE_PERCENT = 2.0
+WEAR_ERROR_PERCENT = 10.0
+WEAR_COVERAGE = 0.9
+#: Scenes that are not the downhole cycle (outside the load-RMSE floor).
+NOT_DOWNHOLE = ("stationary-hold",)
+FILES = ("results.json", "results.md", "pareto.png")
+
+
+@dataclass(frozen=True)
+class Floor:
+    """One floor: what is required, what was measured, and whether it holds (None: not
+    measured in this run)."""
+
+    name: str
+    requirement: str
+    measured: str
+    passed: bool | None
+
+
+def _missing(name: str, requirement: str) -> Floor:
+    return Floor(name, requirement, "not measured in this run", None)
+
+
+def pooled_timing(runs: Iterable[Run]) -> Timing:
+    """Per-call statistics over the calls of several runs."""
+    return Timing.of(np.concatenate([r.durations_ns for r in runs]))
+
+
+def pooled_rmse_percent(runs: Iterable[Run]) -> float:
+    """Load RMSE over the moving estimates of several runs, % of the largest paper load."""
+    chosen = [r for r in runs if r.metrics.moving_estimates]
+    if not chosen:
+        return math.nan
+    squares = sum(r.metrics.moving_estimates * r.rmse_percent_largest**2 for r in chosen)
+    return math.sqrt(squares / sum(r.metrics.moving_estimates for r in chosen))
+
+
+def _mark(passed: bool | None) -> str:
+    return {True: "pass", False: "**FAIL**", None: "not measured"}[passed]
+
+
+def _delay(delay_s: float | None) -> str:
+    return "never" if delay_s is None else f"{delay_s:.2f} s"
+
+
+def _naive_floors(results: BenchResults) -> list[Floor]:
+    names = (
+        f"default >= {NAIVE_SPEEDUP:g}x faster per sample than naive",
+        f"default <= {NAIVE_EXTRA_RMSE_PERCENT:g} % extra load RMSE over naive",
+        "default detects jams no worse than naive",
+    )
+    requirements = (
+        "mean cost per sample ratio",
+        "per scene, % of the largest load",
+        "every jam naive finds, as early; no more false declarations",
+    )
+    naive = {r.scene: r for r in results.runs_of(kind="excerpt", config="naive")}
+    default = {r.scene: r for r in results.runs_of(kind="excerpt", config="default")}
+    scenes = sorted(set(naive) & set(default))
+    if not scenes:
+        return [_missing(n, q) for n, q in zip(names, requirements, strict=True)]
+    slow = pooled_timing(naive[s] for s in scenes).mean_us
+    fast = pooled_timing(default[s] for s in scenes).mean_us
+    extra = {s: default[s].rmse_percent_largest - naive[s].rmse_percent_largest for s in scenes}
+    worse = []
+    detections = []
+    for s in scenes:
+        for d, n in zip(default[s].metrics.jams, naive[s].metrics.jams, strict=True):
+            detections.append(f"{s} {d.onset_s:.2f} s: {_delay(d.delay_s)} vs {_delay(n.delay_s)}")
+            if n.delay_s is not None and (d.delay_s is None or d.delay_s > n.delay_s):
+                worse.append(s)
+        if default[s].metrics.false_jam_declarations > naive[s].metrics.false_jam_declarations:
+            worse.append(s)
+    seconds = results.plan["naive_seconds"]
+    return [
+        Floor(
+            names[0],
+            f">= {NAIVE_SPEEDUP:g}x",
+            f"{slow / fast:,.0f}x ({slow:,.0f} vs {fast:.1f} us per sample, first {seconds:g} s "
+            f"of {', '.join(scenes)})",
+            slow / fast >= NAIVE_SPEEDUP,
+        ),
+        Floor(
+            names[1],
+            f"<= {NAIVE_EXTRA_RMSE_PERCENT:g} %",
+            ", ".join(f"{s} {v:+.3f} %" for s, v in extra.items()),
+            max(extra.values()) <= NAIVE_EXTRA_RMSE_PERCENT,
+        ),
+        Floor(
+            names[2],
+            requirements[2],
+            "; ".join(detections) or "no jam in the excerpts; false declarations compared",
+            not worse,
+        ),
+    ]
+
+
+def _jam_floors(onsets: list[JamOnset]) -> list[Floor]:
+    floors = []
+    for category in ONSET_CATEGORIES:
+        name = f"jams identified within one motion cycle: {category}"
+        found = [o for o in onsets if o.config == "default" and o.category == category]
+        if not found:
+            floors.append(_missing(name, "every onset"))
+            continue
+        parts = []
+        for count in sorted({o.count for o in found}):
+            group = [o for o in found if o.count == count]
+            hits = sum(o.within_cycle for o in group)
+            parts.append(f"jam {count}: {hits}/{len(group)}")
+        delays = [o.delay_s for o in found if o.delay_s is not None]
+        median = f", median delay {np.median(delays):.2f} s" if delays else ""
+        floors.append(
+            Floor(
+                name,
+                "every onset",
+                f"{'; '.join(parts)}{median}",
+                all(o.within_cycle for o in found),
+            )
+        )
+    return floors
+
+
+def _wear_floors(results: BenchResults) -> list[Floor]:
+    true_name = f"precision loss with the true wear factor within {WEAR_ERROR_PERCENT:g} %"
+    prior_name = f"precision loss within +-2 sigma >= {100 * WEAR_COVERAGE:g} % (factor from prior)"
+    floors = []
+    run = results.wear_true_factor
+    if run is None:
+        floors.append(_missing(true_name, "final error"))
+    else:
+        floors.append(
+            Floor(
+                true_name,
+                f"|final error| <= {WEAR_ERROR_PERCENT:g} %",
+                f"{run.final_error_percent:+.2f} % of {run.truth_final_um:.1f} um "
+                f"(factor {run.true_factor:.4f})",
+                abs(run.final_error_percent) <= WEAR_ERROR_PERCENT,
+            )
+        )
+    prior = results.wear_prior
+    if not prior:
+        floors.append(_missing(prior_name, "fraction of estimates"))
+    else:
+        coverage = prior_coverage(prior)
+        floors.append(
+            Floor(
+                prior_name,
+                f">= {100 * WEAR_COVERAGE:g} % of estimates",
+                f"{100 * coverage:.1f} % over {len(prior)} runs (lowest run "
+                f"{100 * min(r.coverage_2sigma for r in prior):.0f} %)",
+                coverage >= WEAR_COVERAGE,
+            )
+        )
+    return floors
+
+
+def prior_coverage(runs: list[WearRun]) -> float:
+    """Fraction of all estimates of the prior runs whose truth is within +-2 sigma."""
+    return sum(r.coverage_2sigma * r.estimates for r in runs) / sum(r.estimates for r in runs)
+
+
+def _floor(
+    name: str,
+    requirement: str,
+    runs: list[Run],
+    measure: Callable[[list[Run]], tuple[str, bool]],
+) -> Floor:
+    """A floor measured on ``runs`` by ``measure`` (text, verdict); "not measured" without."""
+    if not runs:
+        return _missing(name, requirement)
+    measured, passed = measure(runs)
+    return Floor(name, requirement, measured, passed)
+
+
+def _cost(runs: list[Run]) -> tuple[str, bool]:
+    timing = pooled_timing(runs)
+    chunked_us = 1e6 * sum(r.chunked_s or 0.0 for r in runs) / sum(r.samples for r in runs)
+    return (
+        f"median {timing.median_us:.1f} us, p99 {timing.p99_us:.0f} us, mean "
+        f"{timing.mean_us:.1f} us over {timing.calls:,} calls; chunked {chunked_us:.1f} us",
+        timing.median_us <= MEDIAN_COST_US,
+    )
+
+
+def _replay(runs: list[Run]) -> tuple[str, bool]:
+    ratios = {r.scene: r.replay_over_decode or 0.0 for r in runs}
+    worst = max(ratios, key=ratios.__getitem__)
+    return (
+        f"{min(ratios.values()):.2f}x to {ratios[worst]:.2f}x ({worst})",
+        ratios[worst] <= REPLAY_OVER_DECODE,
+    )
+
+
+def _rmse(runs: list[Run]) -> tuple[str, bool]:
+    worst = max(runs, key=lambda r: r.rmse_percent_largest)
+    return (
+        f"largest {worst.rmse_percent_largest:.2f} % ({worst.scene}), pooled "
+        f"{pooled_rmse_percent(runs):.2f} % over {len(runs)} scenes",
+        worst.rmse_percent_largest <= RMSE_PERCENT,
+    )
+
+
+def _false_jams(runs: list[Run]) -> tuple[str, bool]:
+    metrics = runs[0].metrics
+    hours = runs[0].samples / 1000.0 / 3600.0
+    return (
+        f"{metrics.false_jam_declarations} ({metrics.false_jam_seconds:.1f} s declared) over "
+        f"{hours:.2f} h",
+        metrics.false_jam_declarations == 0,
+    )
+
+
+def _nees(runs: list[Run]) -> tuple[str, bool]:
+    failed = [r.scene for r in runs if not r.metrics.load_nees_consistent]
+    listed = f"; not: {', '.join(failed)}" if failed else ""
+    return f"{len(runs) - len(failed)}/{len(runs)} consistent{listed}", not failed
+
+
+def floors(results: BenchResults) -> list[Floor]:
+    """Every floor of issue 6, measured on ``results``."""
+    default = results.runs_of(config="default")
+    return [
+        *_naive_floors(results),
+        _floor(
+            f"median estimator cost <= {MEDIAN_COST_US:g} us per sample",
+            f"<= {MEDIAN_COST_US:g} us (one call per sample)",
+            default,
+            _cost,
+        ),
+        _floor(
+            f"offline replay <= {REPLAY_OVER_DECODE:g}x the bare decode time",
+            f"<= {REPLAY_OVER_DECODE:g}x on every bag",
+            [r for r in default if r.replay_over_decode is not None],
+            _replay,
+        ),
+        _floor(
+            f"load RMSE while moving <= {RMSE_PERCENT:g} % of the largest paper load",
+            f"<= {RMSE_PERCENT:g} % on every downhole scene",
+            [r for r in default if r.scene not in NOT_DOWNHOLE],
+            _rmse,
+        ),
+        *_jam_floors(results.jam_onsets),
+        _floor(
+            "no false jam in one hour of nominal cycles",
+            "0 false declarations",
+            [r for r in default if r.scene == "nominal-1h"],
+            _false_jams,
+        ),
+        *_wear_floors(results),
+        _floor("load NEES consistent (95 % chi-square test)", "every scene", default, _nees),
+    ]
+
+
+# --- results.json -----------------------------------------------------------------------------
+def _finite(value: Any) -> Any:
+    """JSON-safe: non-finite floats become None, tuples lists, recursively."""
+    if isinstance(value, float):
+        return value if math.isfinite(value) else None
+    if isinstance(value, dict):
+        return {k: _finite(v) for k, v in value.items()}
+    if isinstance(value, list | tuple):
+        return [_finite(v) for v in value]
+    return value
+
+
+def _run_json(run: Run) -> dict[str, Any]:
+    return {
+        "scene": run.scene,
+        "group": run.group,
+        "config": run.config,
+        "kind": run.kind,
+        "samples": run.samples,
+        "estimates": run.estimates,
+        "chunked_s": run.chunked_s,
+        "samples_per_s": run.samples_per_s,
+        "decode_s": run.decode_s,
+        "replay_over_decode": run.replay_over_decode,
+        "per_sample": dataclasses.asdict(run.timing),
+        "load_rmse_percent_largest": run.rmse_percent_largest,
+        "largest_load_n": run.largest_load_n,
+        "metrics": run.metrics.to_dict(),
+    }
+
+
+def results_json(results: BenchResults, found: list[Floor]) -> dict[str, Any]:
+    """Every number of the run, JSON-able."""
+    document: dict[str, Any] = _finite(
+        {
+            "mode": results.mode,
+            "elapsed_s": results.elapsed_s,
+            "machine": results.machine,
+            "plan": results.plan,
+            "skipped_configs": results.skipped_configs,
+            "floors": [dataclasses.asdict(f) for f in found],
+            "runs": [_run_json(r) for r in results.runs],
+            "jam_onsets": [
+                {**dataclasses.asdict(o), "within_cycle": o.within_cycle}
+                for o in results.jam_onsets
+            ],
+            "wear_true_factor": (
+                dataclasses.asdict(results.wear_true_factor)
+                if results.wear_true_factor is not None
+                else None
+            ),
+            "wear_prior": [dataclasses.asdict(w) for w in results.wear_prior],
+            "wear_prior_coverage": prior_coverage(results.wear_prior)
+            if results.wear_prior
+            else None,
+        }
+    )
+    return document
+
+
+# --- results.md -------------------------------------------------------------------------------
+def _table(header: list[str], rows: list[list[str]]) -> list[str]:
+    lines = ["| " + " | ".join(header) + " |", "|" + "---|" * len(header)]
+    return lines + ["| " + " | ".join(row) + " |" for row in rows]
+
+
+def _number(value: float | None, spec: str) -> str:
+    if value is None or not math.isfinite(value):
+        return "-"
+    return format(value, spec)
+
+
+def _columns(runs: list[Run]) -> list[str]:
+    """Scene columns: each scene, the two-jam runs as one column."""
+    names: list[str] = []
+    for run in runs:
+        column = "two-jam" if run.group == "two-jam" else run.scene
+        if column not in names:
+            names.append(column)
+    return names
+
+
+def _in_column(run: Run, column: str) -> bool:
+    return (run.group == "two-jam") if column == "two-jam" else run.scene == column
+
+
+def _matrices(results: BenchResults, configs: list[str]) -> list[str]:
+    runs = results.runs_of()
+    columns = _columns(runs)
+    header = [
+        "configuration",
+        *[c if c != "two-jam" else f"two-jam (x{_count(runs)})" for c in columns],
+    ]
+    time_rows, error_rows = [], []
+    for config in configs:
+        mine = [r for r in runs if r.config == config]
+        time_row, error_row = [config], [config]
+        for column in columns:
+            cell = [r for r in mine if _in_column(r, column)]
+            if not cell:
+                time_row.append("")
+                error_row.append("")
+                continue
+            timing = pooled_timing(cell)
+            time_row.append(
+                f"{timing.mean_us:,.1f} ({timing.median_us:.0f} / {timing.p99_us:,.0f})"
+            )
+            error_row.append(f"{pooled_rmse_percent(cell):.2f}")
+        time_rows.append(time_row)
+        error_rows.append(error_row)
+    return [
+        "### Time per sample [us]: mean (median / p99), one `process` call per sample",
+        "",
+        *_table(header, time_rows),
+        "",
+        "### Load RMSE while moving [% of the largest paper load, 55 kN]",
+        "",
+        *_table(header, error_rows),
+    ]
+
+
+def _count(runs: list[Run]) -> int:
+    return len({r.scene for r in runs if r.group == "two-jam"})
+
+
+def _summary(results: BenchResults, configs: list[str]) -> list[str]:
+    rows = []
+    for config in configs:
+        runs = results.runs_of(config=config)
+        if not runs:
+            continue
+        timing = pooled_timing(runs)
+        samples = sum(r.samples for r in runs)
+        chunked = sum(r.chunked_s or 0.0 for r in runs)
+        onsets = [o for o in results.jam_onsets if o.config == config]
+        metrics = [r.metrics for r in runs]
+        rows.append(
+            [
+                config,
+                str(len(runs)),
+                f"{samples / 1e6:.2f} M",
+                f"{timing.median_us:.1f}",
+                f"{timing.p99_us:,.0f}",
+                f"{timing.mean_us:,.1f}",
+                f"{1e6 * chunked / samples:,.1f}",
+                f"{pooled_rmse_percent(runs):.2f}",
+                f"{max(m.load_max_error_n for m in metrics) / 1e3:.1f}",
+                f"{sum(m.load_nees_consistent for m in metrics)}/{len(metrics)}",
+                f"{sum(o.within_cycle for o in onsets)}/{len(onsets)}",
+                str(sum(m.false_jam_declarations for m in metrics)),
+                f"{np.nanmean([abs(m.precision_loss_error_percent) for m in metrics]):.1f}",
+            ]
+        )
+    header = [
+        "configuration",
+        "scenes",
+        "samples",
+        "median us",
+        "p99 us",
+        "mean us",
+        "chunked us",
+        "RMSE %",
+        "max err kN",
+        "NEES ok",
+        "jams in 1 cycle",
+        "false jams",
+        "mean abs PL err %",
+    ]
+    return _table(header, rows)
+
+
+#: Columns of the per-run tables: header and cell of a run.
+RUN_COLUMNS: dict[str, Callable[[Run], str]] = {
+    "scene": lambda r: r.scene,
+    "config": lambda r: r.config,
+    "samples": lambda r: f"{r.samples:,}",
+    "samples/s": lambda r: _number(r.samples_per_s, ",.0f"),
+    "replay/decode": lambda r: _number(r.replay_over_decode, ".2f"),
+    "median us": lambda r: f"{r.timing.median_us:.1f}",
+    "p99 us": lambda r: f"{r.timing.p99_us:,.0f}",
+    "mean us": lambda r: f"{r.timing.mean_us:,.1f}",
+    "RMSE %": lambda r: f"{r.rmse_percent_largest:.3f}",
+    "max err kN": lambda r: f"{r.metrics.load_max_error_n / 1e3:.2f}",
+    "NEES": lambda r: (
+        f"{r.metrics.load_nees_mean:.2f}{'' if r.metrics.load_nees_consistent else ' (x)'}"
+    ),
+    "jam delays": lambda r: ", ".join(_delay(j.delay_s) for j in r.metrics.jams) or "-",
+    "false jams": lambda r: str(r.metrics.false_jam_declarations),
+    "PL err %": lambda r: _number(r.metrics.precision_loss_error_percent, "+.1f"),
+    "PL 2s cov %": lambda r: f"{100 * r.metrics.precision_loss_coverage_2sigma:.0f}",
+}
+DETAIL_COLUMNS = tuple(RUN_COLUMNS)
+EXCERPT_COLUMNS = (
+    "scene",
+    "config",
+    "samples",
+    "mean us",
+    "median us",
+    "p99 us",
+    "RMSE %",
+    "max err kN",
+    "jam delays",
+    "false jams",
+)
+
+
+def _runs_table(runs: list[Run], columns: tuple[str, ...]) -> list[str]:
+    return _table(list(columns), [[RUN_COLUMNS[c](run) for c in columns] for run in runs])
+
+
+def _decode(results: BenchResults) -> list[str]:
+    rows = []
+    for scene in BAG_SCENES:
+        runs = [r for r in results.runs_of() if r.scene == scene]
+        if not runs or runs[0].decode_s is None:
+            continue
+        decode = runs[0].decode_s
+        cells = [f"{r.config} {r.replay_over_decode:.2f}x" for r in runs if r.replay_over_decode]
+        rows.append([scene, f"{decode * 1e3:.0f} ms", "; ".join(cells)])
+    return _table(["bag", "rosbags decode", "replay time / decode time"], rows)
+
+
+def _onsets(results: BenchResults) -> list[str]:
+    rows = []
+    for o in results.jam_onsets:
+        if o.config != "default":
+            continue
+        rows.append(
+            [
+                o.scene,
+                f"{o.onset_s:.2f}",
+                str(o.count),
+                o.category,
+                _delay(o.delay_s),
+                _number(o.cycle_s, ".1f"),
+                "yes" if o.within_cycle else "**no**",
+            ]
+        )
+    header = ["scene", "onset s", "jam", "category", "identified after", "cycle s", "in 1 cycle"]
+    return _table(header, rows)
+
+
+def _wear(results: BenchResults) -> list[str]:
+    rows = [
+        [
+            w.scene,
+            f"{w.true_factor:.3f}",
+            f"{w.estimator_factor:.3f}",
+            f"{w.truth_final_um:.2f}",
+            f"{w.final_error_percent:+.1f}",
+            f"{100 * w.coverage_2sigma:.0f}",
+        ]
+        for w in ([results.wear_true_factor] if results.wear_true_factor else [])
+        + results.wear_prior
+    ]
+    header = ["run", "true factor", "estimator's factor", "truth um", "final error %", "2s cov %"]
+    return _table(header, rows)
+
+
+def markdown(results: BenchResults, found: list[Floor]) -> str:
+    """``results.md``: the floors, then the tables."""
+    configs = list(dict.fromkeys(r.config for r in results.runs))
+    machine = results.machine
+    lines = [
+        f"# Estimator benchmark ({results.mode} run)",
+        "",
+        f"{machine['cpus']} CPUs ({machine['processor'] or machine['machine']}), Python "
+        f"{machine['python']}, load average {machine['load_average_1min_at_start']:.2f} at "
+        f"the start; the run took {results.elapsed_s / 60:.1f} min. Per-sample timings: the "
+        f"first {results.plan['timing_samples']:,} samples of each run, one `process` call "
+        "each.",
+        "",
+        "## Floors",
+        "",
+        *_table(
+            ["floor", "requirement", "measured", "result"],
+            [[f.name, f.requirement, f.measured, _mark(f.passed)] for f in found],
+        ),
+        "",
+        "## Configurations x scenes",
+        "",
+    ]
+    if results.skipped_configs:
+        lines += [
+            "Not run: " + "; ".join(f"`{k}` {v}" for k, v in results.skipped_configs.items()) + ".",
+            "",
+        ]
+    lines += _matrices(results, [c for c in configs if results.runs_of(config=c)])
+    lines += ["", "### Summary per configuration (all full runs)", "", *_summary(results, configs)]
+    lines += ["", "## Bags: replay against rosbags' bare decode", "", *_decode(results)]
+    if results.runs_of(kind="excerpt"):
+        lines += [
+            "",
+            f"## Naive excerpt: the first {results.plan['naive_seconds']:g} s of "
+            f"{', '.join(results.plan['naive_scenes'])}",
+            "",
+            *_runs_table(results.runs_of(kind="excerpt"), EXCERPT_COLUMNS),
+        ]
+    lines += ["", "## Jam onsets (default configuration)", "", *_onsets(results)]
+    lines += ["", "## Precision loss (default configuration)", "", *_wear(results)]
+    lines += ["", "## Every full run", "", *_runs_table(results.runs_of(), DETAIL_COLUMNS), ""]
+    return "\n".join(lines)
+
+
+# --- pareto.png -------------------------------------------------------------------------------
+def pareto(results: BenchResults, path: Path) -> None:
+    """Mean cost per sample (log x) against load RMSE, one point per configuration: on the
+    full runs, and on the naive excerpt (where every configuration ran)."""
+    import matplotlib  # only when plotting: the CLI starts without it
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    figure, axis = plt.subplots(figsize=(7.0, 4.5))
+    for kind, marker, label in (
+        ("full", "o", "all full runs"),
+        (
+            "excerpt",
+            "s",
+            f"first {results.plan['naive_seconds']:g} s of {len(results.plan['naive_scenes'])} "
+            "bags (naive too)",
+        ),
+    ):
+        configs = list(dict.fromkeys(r.config for r in results.runs_of(kind=kind)))
+        if not configs:
+            continue
+        x = [pooled_timing(results.runs_of(kind=kind, config=c)).mean_us for c in configs]
+        y = [pooled_rmse_percent(results.runs_of(kind=kind, config=c)) for c in configs]
+        axis.scatter(x, y, marker=marker, label=label)
+        for name, xi, yi in zip(configs, x, y, strict=True):
+            axis.annotate(name, (xi, yi), textcoords="offset points", xytext=(4, 3), fontsize=7)
+    axis.set_xscale("log")
+    axis.set_xlabel("mean cost per sample [us] (one process call per sample)")
+    axis.set_ylabel("load RMSE while moving [% of 55 kN]")
+    axis.set_title(f"Estimator configurations: time against error ({results.mode} run)")
+    axis.grid(True, which="both", alpha=0.3)
+    axis.legend(fontsize=8)
+    figure.tight_layout()
+    figure.savefig(path, dpi=110)
+    plt.close(figure)
+
+
+def write_results(results: BenchResults, out: Path) -> list[Floor]:
+    """Write FILES into ``out`` (created if needed); returns the floors."""
+    out.mkdir(parents=True, exist_ok=True)
+    found = floors(results)
+    (out / "results.json").write_text(json.dumps(results_json(results, found), indent=2) + "\n")
+    (out / "results.md").write_text(markdown(results, found))
+    pareto(results, out / "pareto.png")
+    return found

@@ -1,0 +1,225 @@
+"""The estimator benchmark (prsm_health/benchmark.py, benchmark_report.py, bench_command.py).
+
+A tiny plan runs end to end (a recorded 8 s bag with a jam, replayed and decoded; a generated
+run; a wear-prior run; an excerpt): the files are written and every number in them is the
+one measured. The floors are checked for consistency with their thresholds, never for the
+estimator's speed or accuracy (the benchmark reports those, docs/performance.md).
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import json
+import math
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from prsm_health.benchmark import (
+    CONFIGURATIONS,
+    BenchResults,
+    BenchScene,
+    Plan,
+    cycle_period_s,
+    onset_category,
+    quick_plan,
+    run_benchmark,
+    select,
+    skipped_configurations,
+    two_jam_scenes,
+)
+from prsm_health.benchmark_report import (
+    FILES,
+    RMSE_PERCENT,
+    floors,
+    pooled_rmse_percent,
+    write_results,
+)
+from prsm_health.cli import main
+from prsm_health.scenes.recording import record
+from prsm_health.scenes.scene import load_scene, scene_from_mapping
+from prsm_health.scenes.simulator import Simulator
+from prsm_health.signals import TruthSamples
+from test.estimation.test_estimator import downhole
+
+BY_NAME = {c.name: c for c in CONFIGURATIONS}
+
+
+@pytest.fixture(scope="module")
+def results(tmp_path_factory: pytest.TempPathFactory) -> BenchResults:
+    jam = [{"time_s": 2.5, "roller": 3}]
+    bag_scene = scene_from_mapping(downhole(name="tiny-bag", duration_s=8.0, jams=jam))
+    bag = tmp_path_factory.mktemp("bench") / "tiny-bag"
+    record(Simulator(bag_scene), bag)
+    generated = scene_from_mapping(downhole(name="tiny-run", duration_s=8.0, seed=10))
+    wear = scene_from_mapping(
+        downhole(name="tiny-wear", duration_s=4.0, wear={"prior_sigma_ln": 0.5})
+    )
+    plan = Plan(
+        mode="test",
+        scenes=(
+            BenchScene("tiny-bag", "bags", bag_scene, bag=bag),
+            BenchScene("tiny-run", "two-jam", generated),
+        ),
+        configs=(BY_NAME["default"], BY_NAME["radial-on"], BY_NAME["radial-off"]),
+        timing_samples=300,
+        naive_scenes=("tiny-bag",),
+        naive_seconds=3.0,
+        repeats=2,
+        wear_bag=None,
+        wear_prior=(wear,),
+    )
+    return run_benchmark(plan, progress=lambda _: None)
+
+
+def test_every_planned_run_is_measured_and_scored(results: BenchResults) -> None:
+    assert set(results.skipped_configs) == {"radial-on"}
+    full = {(r.scene, r.config) for r in results.runs_of()}
+    assert full == {(s, c) for s in ("tiny-bag", "tiny-run") for c in ("default", "radial-off")}
+    assert {(r.scene, r.config) for r in results.runs_of(kind="excerpt")} == {
+        ("tiny-bag", "default"),
+        ("tiny-bag", "radial-off"),
+    }
+    for run in results.runs:
+        assert run.timing.calls == len(run.durations_ns)
+        assert run.timing.calls == (300 if run.kind == "full" else run.samples)
+        assert 0.0 < run.timing.median_us <= run.timing.p99_us <= run.timing.max_us
+        assert run.timing.mean_us == pytest.approx(run.durations_ns.mean() / 1e3)
+        assert run.metrics.estimates == run.estimates > 0
+        assert run.rmse_percent_largest == pytest.approx(100.0 * run.metrics.load_rmse_n / 55_000.0)
+    bag_runs = [r for r in results.runs_of() if r.scene == "tiny-bag"]
+    assert all(r.decode_s and r.replay_over_decode for r in bag_runs)
+    excerpt = results.runs_of(kind="excerpt")[0]
+    assert excerpt.samples == 3000 and excerpt.chunked_s is None
+
+
+def test_jam_onsets_are_categorised_and_timed(results: BenchResults) -> None:
+    onsets = [o for o in results.jam_onsets if o.scene == "tiny-bag"]
+    assert [o.config for o in onsets] == ["default", "radial-off"]
+    for onset in onsets:
+        assert onset.onset_s == pytest.approx(2.5, abs=0.01)
+        assert onset.count == 1
+        assert onset.category == "steady motion"  # mid-stroke: the stroke starts at 1.0 s
+        assert onset.cycle_s is not None and onset.within_cycle == (
+            onset.delay_s is not None and onset.delay_s <= onset.cycle_s
+        )
+
+
+def test_files_hold_the_measured_numbers(results: BenchResults, tmp_path: Path) -> None:
+    found = write_results(results, tmp_path / "out")
+    for name in FILES:
+        assert (tmp_path / "out" / name).stat().st_size > 0
+    assert (tmp_path / "out" / "pareto.png").read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
+    document = json.loads((tmp_path / "out" / "results.json").read_text())
+    assert len(document["runs"]) == len(results.runs)
+    for entry, run in zip(document["runs"], results.runs, strict=True):
+        assert entry["per_sample"]["median_us"] == run.timing.median_us
+        assert entry["metrics"]["load_rmse_n"] == run.metrics.load_rmse_n
+    assert [f["name"] for f in document["floors"]] == [f.name for f in found]
+    assert document["wear_prior"][0]["true_factor"] == results.wear_prior[0].true_factor
+    text = (tmp_path / "out" / "results.md").read_text()
+    for floor in found:
+        assert floor.name in text
+    assert "tiny-bag" in text and "radial-off" in text
+
+
+def test_floors_follow_their_thresholds(results: BenchResults) -> None:
+    """Each floor's verdict is its measured value against its threshold: a run made worse
+    than the threshold flips the RMSE floor; missing runs are "not measured"."""
+    by_name = {f.name: f for f in floors(results)}
+    rmse = next(f for name, f in by_name.items() if name.startswith("load RMSE"))
+    default = results.runs_of(config="default")
+    worst = max(r.rmse_percent_largest for r in default)
+    assert rmse.passed == (worst <= RMSE_PERCENT)
+    bad = dataclasses.replace(
+        default[0],
+        metrics=dataclasses.replace(default[0].metrics, load_rmse_n=0.03 * 55_000.0),
+    )
+    worse = dataclasses.replace(results, runs=[bad, *results.runs[1:]])
+    assert next(f for f in floors(worse) if f.name == rmse.name).passed is False
+    hour = next(f for name, f in by_name.items() if "one hour" in name)
+    naive = next(f for name, f in by_name.items() if "faster per sample than naive" in name)
+    assert hour.passed is None and naive.passed is None
+    assert pooled_rmse_percent(default) == pytest.approx(
+        math.sqrt(
+            sum(r.metrics.moving_estimates * r.rmse_percent_largest**2 for r in default)
+            / sum(r.metrics.moving_estimates for r in default)
+        )
+    )
+
+
+def _truth(speed: list[float], load: list[float]) -> TruthSamples:
+    n = len(speed)
+    return TruthSamples(
+        stamp_s=0.1 * np.arange(n),
+        axial_load_n=np.asarray(load, dtype=np.float64),
+        radial_load_n=np.zeros(n),
+        loading_case=np.ones(n, dtype=np.int64),
+        roller_jammed=np.zeros((n, 10), dtype=bool),
+        precision_loss_m=np.zeros(n),
+        friction_torque_nm=np.zeros(n),
+        fatigue_damage=np.zeros(n),
+        screw_speed_rad_s=np.asarray(speed, dtype=np.float64),
+        carrier_angle_rad=np.zeros(n),
+        wear_coefficient_factor=np.ones(n),
+    )
+
+
+def test_onset_categories_from_the_truth() -> None:
+    """Two strokes: loads ramp up and down; the categories follow speed and load."""
+    speed = [0, 0, 30, 30, 30, 30, 30, 0, 0, -30, -30, -30, 0]
+    load = [0, 0, 2e3, 2e4, 4e4, 4e4, 5e3, 0, 0, -3e4, -3e4, -1e4, 0]
+    truth = _truth(speed, load)
+    expected = {  # truth sample of the onset: category
+        1: "standstill",
+        2: "stroke end/low load",  # 2 kN of a 40 kN stroke
+        3: "steady motion",  # half of it
+        4: "steady motion",
+        6: "stroke end/low load",
+        8: "standstill",
+        9: "steady motion",
+        11: "stroke end/low load",  # 10 kN of a 30 kN stroke
+    }
+    for index, category in expected.items():
+        assert onset_category(truth, float(truth.stamp_s[index]), 1.0) == category, index
+
+
+def test_two_jam_runs_are_reproducible_and_leave_a_cycle_after_each_jam() -> None:
+    scenes = two_jam_scenes(4)
+    assert [s.name for s in scenes] == [s.name for s in two_jam_scenes(4)]
+    assert [s.jams for s in scenes] == [s.jams for s in two_jam_scenes(4)]
+    for scene in scenes:
+        assert 40.0 <= scene.duration_s <= 60.0
+        first, second = scene.jams
+        assert second.time_s - first.time_s >= 2.0
+        assert second.time_s <= scene.duration_s - 25.0
+        assert first.roller != second.roller
+
+
+def test_cycle_period_of_sudden_jam_is_its_documented_cycle() -> None:
+    """bags/README.md: sudden-jam runs at 350 rpm, a cycle of 20.8 s."""
+    period = cycle_period_s(load_scene("sudden-jam"))
+    assert period == pytest.approx(20.8, abs=0.05)
+    assert cycle_period_s(load_scene("stationary-hold")) is None
+
+
+def test_radial_on_is_skipped_where_auto_resolves_to_it() -> None:
+    assert set(skipped_configurations(CONFIGURATIONS)) == {"radial-on"}
+
+
+def test_selection_by_name_and_group_and_unknown_names() -> None:
+    plan = quick_plan()
+    chosen = select(plan, scenes=["two-jam"], configs=["default"])
+    assert [s.name for s in chosen.scenes] == ["two-jam-1"]
+    assert [c.name for c in chosen.configs] == ["default"]
+    assert chosen.wear_bag is None and chosen.wear_prior == ()
+    with pytest.raises(ValueError, match="unknown nope"):
+        select(plan, scenes=["nope"], configs=None)
+    with pytest.raises(ValueError, match="unknown fast"):
+        select(plan, scenes=None, configs=["fast"])
+
+
+def test_cli_refuses_unknown_configurations(capsys: pytest.CaptureFixture[str]) -> None:
+    assert main(["bench", "--quick", "--configs", "fast"]) == 2
+    assert "unknown fast" in capsys.readouterr().err
