@@ -1,0 +1,1 @@
+"""Stress suite: filter soak, physics properties, fuzzing (docs/stability.md)."""
