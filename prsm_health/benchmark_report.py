@@ -412,16 +412,26 @@ def _count(runs: list[Run]) -> int:
     return len({r.scene for r in runs if r.group == "two-jam"})
 
 
-def _summary(results: BenchResults, configs: list[str]) -> list[str]:
+def common_runs(results: BenchResults, kind: str) -> dict[str, list[Run]]:
+    """Per configuration, its runs of ``kind`` on the scenes that every configuration ran
+    (the one-hour run is the default's only), so that pooled numbers compare."""
+    by_config: dict[str, list[Run]] = {}
+    for run in results.runs_of(kind=kind):
+        by_config.setdefault(run.config, []).append(run)
+    if not by_config:
+        return {}
+    shared = set.intersection(*({r.scene for r in runs} for runs in by_config.values()))
+    return {c: [r for r in runs if r.scene in shared] for c, runs in by_config.items()}
+
+
+def _summary(results: BenchResults) -> list[str]:
     rows = []
-    for config in configs:
-        runs = results.runs_of(config=config)
-        if not runs:
-            continue
+    for config, runs in common_runs(results, "full").items():
         timing = pooled_timing(runs)
         samples = sum(r.samples for r in runs)
         chunked = sum(r.chunked_s or 0.0 for r in runs)
-        onsets = [o for o in results.jam_onsets if o.config == config]
+        scenes = {r.scene for r in runs}
+        onsets = [o for o in results.jam_onsets if o.config == config and o.scene in scenes]
         metrics = [r.metrics for r in runs]
         rows.append(
             [
@@ -575,7 +585,17 @@ def markdown(results: BenchResults, found: list[Floor]) -> str:
             "",
         ]
     lines += _matrices(results, [c for c in configs if results.runs_of(config=c)])
-    lines += ["", "### Summary per configuration (all full runs)", "", *_summary(results, configs)]
+    common = common_runs(results, "full")
+    shared = sorted({r.scene for runs in common.values() for r in runs})
+    left_out = sorted({r.scene for r in results.runs_of()} - set(shared))
+    lines += [
+        "",
+        f"### Summary per configuration ({len(shared)} scenes that every configuration ran"
+        + (f"; not {', '.join(left_out)}" if left_out else "")
+        + ")",
+        "",
+        *_summary(results),
+    ]
     lines += ["", "## Bags: replay against rosbags' bare decode", "", *_decode(results)]
     if results.runs_of(kind="excerpt"):
         lines += [
@@ -599,33 +619,45 @@ def pareto(results: BenchResults, path: Path) -> None:
 
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
+    from matplotlib.ticker import FuncFormatter, NullFormatter
 
-    figure, axis = plt.subplots(figsize=(7.0, 4.5))
-    for kind, marker, label in (
-        ("full", "o", "all full runs"),
+    panels = [
+        ("full", "full runs: scenes every configuration ran"),
         (
             "excerpt",
-            "s",
-            f"first {results.plan['naive_seconds']:g} s of {len(results.plan['naive_scenes'])} "
-            "bags (naive too)",
+            f"first {results.plan['naive_seconds']:g} s of "
+            f"{len(results.plan['naive_scenes'])} bags (naive too)",
         ),
-    ):
-        configs = list(dict.fromkeys(r.config for r in results.runs_of(kind=kind)))
-        if not configs:
-            continue
-        x = [pooled_timing(results.runs_of(kind=kind, config=c)).mean_us for c in configs]
-        y = [pooled_rmse_percent(results.runs_of(kind=kind, config=c)) for c in configs]
-        axis.scatter(x, y, marker=marker, label=label)
-        for name, xi, yi in zip(configs, x, y, strict=True):
-            axis.annotate(name, (xi, yi), textcoords="offset points", xytext=(4, 3), fontsize=7)
-    axis.set_xscale("log")
-    axis.set_xlabel("mean cost per sample [us] (one process call per sample)")
-    axis.set_ylabel("load RMSE while moving [% of 55 kN]")
-    axis.set_title(f"Estimator configurations: time against error ({results.mode} run)")
-    axis.grid(True, which="both", alpha=0.3)
-    axis.legend(fontsize=8)
+    ]
+    panels = [(kind, title) for kind, title in panels if common_runs(results, kind)]
+    figure, axes = plt.subplots(1, len(panels), figsize=(5.0 * len(panels), 4.5), squeeze=False)
+    for axis, (kind, title) in zip(axes[0], panels, strict=True):
+        points = sorted(
+            (pooled_timing(runs).mean_us, pooled_rmse_percent(runs), config)
+            for config, runs in common_runs(results, kind).items()
+        )
+        axis.set_xscale("log")
+        axis.set_yscale("log")
+        axis.scatter([p[0] for p in points], [p[1] for p in points])
+        for i, (x, y, name) in enumerate(points):  # alternate label sides: near points differ
+            offset = (5, 4) if i % 2 == 0 else (5, -10)
+            axis.annotate(name, (x, y), textcoords="offset points", xytext=offset, fontsize=7)
+        for scale, values in (
+            (axis.xaxis, [p[0] for p in points]),
+            (axis.yaxis, [p[1] for p in points]),
+        ):
+            # Whole decades around the points: labelled major ticks, no crowded minor labels.
+            low, high = math.floor(math.log10(min(values))), math.ceil(math.log10(max(values)))
+            scale.set_view_interval(10.0**low, 10.0 ** max(high, low + 1))
+            scale.set_major_formatter(FuncFormatter(lambda value, _: f"{value:g}"))
+            scale.set_minor_formatter(NullFormatter())
+        axis.set_title(title, fontsize=9)
+        axis.set_xlabel("mean cost per sample [us], one process call per sample")
+        axis.grid(True, which="both", alpha=0.3)
+    axes[0][0].set_ylabel("load RMSE while moving [% of 55 kN]")
+    figure.suptitle(f"Estimator configurations: time against error ({results.mode} run)")
     figure.tight_layout()
-    figure.savefig(path, dpi=110)
+    figure.savefig(path, dpi=100)
     plt.close(figure)
 
 
