@@ -85,8 +85,10 @@ def bag_files(path: str | Path) -> BagFiles:
         raise BagError(meta, f"storage file(s) listed but missing: {', '.join(missing)}")
     topics: dict[str, str] = {}
     for entry in _require(meta, info, "topics_with_message_count", list):
-        topic = entry.get("topic_metadata", {}) if isinstance(entry, dict) else {}
-        if not isinstance(topic.get("name"), str) or not isinstance(topic.get("type"), str):
+        topic = entry.get("topic_metadata") if isinstance(entry, dict) else None
+        if not isinstance(topic, dict) or not all(
+            isinstance(topic.get(key), str) for key in ("name", "type")
+        ):
             raise BagError(meta, f"topic entry without name and type: {entry!r}")
         topics[topic["name"]] = topic["type"]
     return BagFiles(bag, files, topics)

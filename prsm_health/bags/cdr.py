@@ -184,7 +184,9 @@ def fill_rows(
             continue
         data = np.ascontiguousarray(values[field.name], dtype=field.dtype)
         size = np.dtype(field.dtype).itemsize * field.count
-        rows[:, field.offset : field.offset + size] = data.reshape(count, -1).view(np.uint8)
+        rows[:, field.offset : field.offset + size] = data.reshape(count, field.count).view(
+            np.uint8
+        )
     return rows
 
 

@@ -2,7 +2,8 @@
 
 Hypothesis k says "k rollers are jammed"; each has its own filter over the continuous state
 (load and its derivatives, ripple) and a probability. Jams only ever increase, with a prior
-probability p = 1 - exp(-rate dt) per block. One step per block:
+probability p = 1 - exp(-rate dt) per block, dt its duration but at most
+``LONGEST_PREDICTION_S``. One step per block:
 
 1. merging (the IMM mixing of Blom and Bar-Shalom, filterpy's ``IMMEstimator``): for each
    count k, the established hypothesis k (probability times 1 - p: no new jam) and the
@@ -11,7 +12,7 @@ probability p = 1 - exp(-rate dt) per block. One step per block:
    established k a fresh hypothesis k + 1 is born: the state of k (the load does not change
    when a roller seizes) plus the covariance of a new ripple of unknown phase
    (ripple_prior_std^2 on c and s), with probability times p;
-2. each filter predicts and updates (filterpy ``ExtendedKalmanFilter`` or
+2. each filter predicts over dt and updates (filterpy ``ExtendedKalmanFilter`` or
    ``UnscentedKalmanFilter``; Joseph-form covariance update in the EKF). A fresh hypothesis
    predicts the block in which its jam starts at a uniformly random instant
    (:meth:`JamHypotheses._measurement`);
@@ -60,6 +61,16 @@ Filter = Any  # filterpy filters carry no type information
 
 #: Hypotheses less probable than exp(this) reuse their prediction from before the update.
 NEGLIGIBLE_LOG_PROBABILITY = math.log(1e-6)
+
+#: Longest prediction of the filters [s]. Blocks after a longer silence follow a re-acquisition
+#: of the load (the estimator forgets its derivatives after HOLE_BLOCKS blocks of silence), and
+#: from the initial derivative variances one second already spreads the load over five times
+#: its rated value: predicting further adds no honesty, only a near rank-one covariance (load,
+#: rate and acceleration correlated as 1, dt, dt^2/2) whose innovation variance loses its digits.
+#: The jam prior of a block counts the same time: jams are a hazard of operation, and a jam
+#: that happened during a silence shows in the data after it; a sensor clock jumping by years
+#: must not declare a jam.
+LONGEST_PREDICTION_S = 1.0
 
 #: Smallest variance kept on each state, relative to its initial variance.
 VARIANCE_FLOOR_RATIO = 1e-12
@@ -235,9 +246,9 @@ class JamHypotheses:
         """Step 1 of the module docstring: merge each count, then give birth to fresh jams."""
         if self._prune:
             self._drop_unlikely()
-        p_jump = -math.expm1(-self._rate_per_s * dt)
-        log_stay = math.log1p(-p_jump)
-        log_jump = math.log(p_jump) if p_jump > 0.0 else -math.inf
+        expected_jams = self._rate_per_s * dt
+        log_stay = -expected_jams  # exact: no 1 - p to round to 0 over a long block
+        log_jump = math.log(-math.expm1(-expected_jams)) if expected_jams > 0.0 else -math.inf
         by_count: dict[int, list[Hypothesis]] = {}
         for h in self.hypotheses:
             by_count.setdefault(h.count, []).append(h)
@@ -283,7 +294,7 @@ class JamHypotheses:
         ``evidence=False``: the filters update but the probabilities are not reweighted
         (the caller knows the block cannot tell jams from load changes).
         """
-        dt = block.duration_s
+        dt = min(block.duration_s, LONGEST_PREDICTION_S)
         self._merge(dt)
         nis: list[float] = []
         log_likelihood: list[float] = []

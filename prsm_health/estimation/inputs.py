@@ -35,6 +35,9 @@ SPIKE_SIGMAS = 12.0
 #: This many identical consecutive current samples (while the noise should vary them) are a
 #: stuck sensor; all of them are rejected (blocks close this many samples late for it).
 STUCK_RUN_SAMPLES = 20
+#: A block whose samples span less than this [s] has no measurable slope: its acceleration
+#: and current trend are taken as zero (a speed step over a vanishing span would overflow).
+SHORTEST_SLOPE_SPAN_S = 1e-6
 
 
 class RejectReason(enum.IntEnum):
@@ -333,12 +336,14 @@ class SampleBlocker:
 
         mean_t, mean_w, mean_i = means(t), means(w), means(run.current_a)
         variance_t = means(t * t) - mean_t**2
-        spread = variance_t > 1e-12
+        spread = variance_t > SHORTEST_SLOPE_SPAN_S**2
         # The mean acceleration over the block is the speed change over its span (a least
         # squares slope would miss an acceleration that starts or stops inside the block).
         last = np.r_[starts[1:], len(run)] - 1
         span = t[last]
-        slope = np.divide(w[last] - w[starts], span, out=np.zeros_like(span), where=span > 0.0)
+        slope = np.divide(
+            w[last] - w[starts], span, out=np.zeros_like(span), where=span > SHORTEST_SLOPE_SPAN_S
+        )
         covariance_ti = means(t * run.current_a) - mean_t * mean_i
         trend = np.divide(covariance_ti**2, variance_t, out=np.zeros_like(mean_t), where=spread)
         residual_var = np.maximum(means(run.current_a**2) - mean_i**2 - trend, 0.0)

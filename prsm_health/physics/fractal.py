@@ -237,14 +237,15 @@ class _AreaTable:
     log_load: FloatArray
     log_area: FloatArray
     plastic_limit_n: float
-    largest_load_n: float
 
 
 @cache
 def _area_table(surface: FractalSurface) -> _AreaTable:
     """Monotone table log F -> log A_r from a_pc up to LARGEST_TABLE_LOAD_N (001 eq. 15-22)."""
     lower = surface.plastic_area_m2
-    upper = solve_largest_spot_m2(surface, LARGEST_TABLE_LOAD_N)
+    # A hair beyond the documented limit, so that the table (which ends at the load of a root
+    # solved to a tolerance) covers LARGEST_TABLE_LOAD_N itself.
+    upper = solve_largest_spot_m2(surface, 1.001 * LARGEST_TABLE_LOAD_N)
     spots = np.unique(
         np.concatenate(
             [
@@ -258,7 +259,6 @@ def _area_table(surface: FractalSurface) -> _AreaTable:
         log_load=np.log(loads),
         log_area=np.log(surface.real_area_m2(spots)),
         plastic_limit_n=float(loads[0]),
-        largest_load_n=float(loads[-1]),
     )
 
 
@@ -272,10 +272,10 @@ def real_contact_area_m2(surface: FractalSurface, load_n: ArrayLike) -> FloatArr
     table = _area_table(surface)
     if not np.all(np.isfinite(load)) or np.any(load < 0.0):
         raise ParameterError("load_n", "contact forces must be finite and >= 0")
-    if np.any(load > table.largest_load_n):
+    if np.any(load > LARGEST_TABLE_LOAD_N):
         raise DomainError(
             f"contact force {float(load.max()):.4g} N exceeds the fractal table's "
-            f"{table.largest_load_n:.4g} N"
+            f"{LARGEST_TABLE_LOAD_N:.4g} N"
         )
     plastic = load <= table.plastic_limit_n
     log_load = np.log(np.where(plastic, table.plastic_limit_n, load))

@@ -123,6 +123,12 @@ def test_empty_topic_reads_as_no_samples(tmp_path: Path) -> None:
     assert list(iter_motor_samples(tmp_path / "bag")) == []
 
 
+def test_an_empty_series_writes_no_messages(tmp_path: Path) -> None:
+    with BagWriter(tmp_path / "bag") as writer:
+        write_motor_states(writer, motor_samples(0))
+    assert len(read_motor_samples(tmp_path / "bag")) == 0
+
+
 def test_log_time_order_across_overlapping_chunks(tmp_path: Path) -> None:
     """Receive times in random order: chunks overlap in time; the reader merges them exactly."""
     motor = motor_samples(40000, faults=False)
@@ -206,6 +212,12 @@ def test_errors_name_the_file_and_what_is_wrong(tmp_path: Path) -> None:
         "rosbag2_bagfile_information: {storage_identifier: sqlite3}"
     )
     with pytest.raises(BagError, match="storage_identifier is 'sqlite3'"):
+        read_motor_samples(tmp_path / "bad")
+    (tmp_path / "bad" / "metadata.yaml").write_text(
+        "rosbag2_bagfile_information: {storage_identifier: mcap, relative_file_paths: [],"
+        " topics_with_message_count: [{topic_metadata: null}]}"
+    )
+    with pytest.raises(BagError, match="topic entry without name and type"):
         read_motor_samples(tmp_path / "bad")
 
 

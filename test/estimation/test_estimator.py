@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import dataclasses
 import itertools
 import math
 from typing import Any
@@ -122,3 +123,26 @@ def test_sensor_faults_are_counted_and_never_reach_the_outputs() -> None:
     last = states[-1]
     assert last.samples_rejected >= 5 + 1 + 280
     assert any(s.event == EstimateEvent.TIME_RESET for s in states)
+
+
+def test_a_sensor_clock_jumping_by_decades_is_a_gap_not_a_jam() -> None:
+    """A drive clock that switches from boot time to the epoch mid-run (+1.7e9 s): the
+    estimator re-acquires the load after the gap, declares no jam and keeps tracking."""
+    scene = scene_from_mapping(downhole())
+    result = simulate(scene)
+    jump_s = 1.7e9
+    later = result.motor.stamp_s >= 8.0
+    shifted = dataclasses.replace(
+        result.motor, stamp_s=np.where(later, result.motor.stamp_s + jump_s, result.motor.stamp_s)
+    )
+    estimator = HealthEstimator(EstimatorParams(actuator=scene.actuator))
+    states = estimator.process(shifted) + estimator.finish()
+    assert all(s.jammed_rollers_most_likely == 0 for s in states)
+    assert max(s.jam_probability for s in states) < 1e-3
+    tail = [s for s in states if s.stamp_s > jump_s + 12.0]
+    truth = np.interp(
+        [s.stamp_s - jump_s for s in tail], result.truth.stamp_s, result.truth.axial_load_n
+    )
+    error = np.array([s.axial_load_n for s in tail]) - truth
+    rated = EstimatorParams(actuator=scene.actuator).rated_load_n
+    assert float(np.sqrt(np.mean(error**2))) < 0.01 * rated

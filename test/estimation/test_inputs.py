@@ -159,3 +159,17 @@ def test_standstill_and_reversal_blocks_have_no_direction() -> None:
     directions = [b.direction for b in blocks]
     assert directions[0] == 0 and directions[-1] == -1
     assert 0 in directions[12:14]
+
+
+def test_samples_closer_than_a_microsecond_carry_no_acceleration() -> None:
+    """A speed step between samples 1e-300 s apart is no acceleration of 1e302 rad/s^2."""
+    samples = MotorSamples(
+        np.array([1e-300, 2e-300, 0.2]),
+        np.array([5.0, 5.0, 5.0]),
+        np.array([150.0, 160.0, 150.0]),
+        np.array([0.0, 0.0, 15.0]),
+    )
+    blocks, blocker = feed_in_chunks(samples, 3)
+    assert blocker.counters.accepted == 3
+    assert blocks[0].samples == 2 and blocks[0].motor_acceleration_rad_s2 == 0.0
+    assert all(math.isfinite(b.motor_acceleration_rad_s2) for b in blocks)

@@ -118,12 +118,9 @@ def _budget(path: str) -> int:
 # --- the bank on blocks -----------------------------------------------------------------------
 #: A high jam rate keeps fresh hypotheses alive in the bank, so several filters run and merge.
 BANK_JAM_RATE_PER_H = 50.0
-#: The bank's longest block. KNOWN ISSUE (docs/stability.md): once the prior jam probability
-#: of one block, 1 - exp(-rate dt), rounds to 1 (rate dt > 36.7), JamHypotheses._merge raises
-#: ValueError (math.log1p(-1)): at this rate a block of 44 min. (At the default rate the
-#: estimator fails earlier, at forward stamp jumps of about 1e7 s: test_fuzz.py.) The soak
-#: stays below it (rate dt <= 14).
-MAX_BANK_DT_S = 1e3
+#: The bank's longest block: years, as after a drive clock jumps from boot time to the epoch
+#: (the filters predict at most hypotheses.LONGEST_PREDICTION_S of it).
+MAX_BANK_DT_S = 1e8
 
 
 def _params(fidelity: Fidelity) -> EstimatorParams:

@@ -14,8 +14,7 @@ from pathlib import Path
 
 import numpy as np
 import pytest
-import yaml
-from hypothesis import HealthCheck, assume, event, given, settings
+from hypothesis import HealthCheck, event, given, settings
 from hypothesis import strategies as st
 from hypothesis.extra import numpy as hnp
 
@@ -130,21 +129,6 @@ def test_damaged_mcap_bytes_give_data_or_a_bag_error(
     assert 0 <= delivered <= MESSAGES + 64
 
 
-def _topic_metadata_not_a_mapping(text: bytes) -> bool:
-    """KNOWN ISSUE (docs/stability.md): a topics_with_message_count entry whose topic_metadata
-    is present but not a mapping (e.g. emptied by a cut) raises AttributeError in
-    bags/bagfiles.py instead of BagError. True for such a document."""
-    try:
-        info = yaml.safe_load(text)["rosbag2_bagfile_information"]
-        entries = info["topics_with_message_count"]
-    except (yaml.YAMLError, UnicodeDecodeError, KeyError, TypeError):
-        return False
-    return isinstance(entries, list) and any(
-        isinstance(e, dict) and "topic_metadata" in e and not isinstance(e["topic_metadata"], dict)
-        for e in entries
-    )
-
-
 @settings(max_examples=30, deadline=None, suppress_health_check=SHARED_DIRECTORY)
 @given(mutation=mutations)
 def test_damaged_metadata_gives_data_or_a_bag_error(
@@ -154,7 +138,6 @@ def test_damaged_metadata_gives_data_or_a_bag_error(
     shutil.copytree(intact, target)
     metadata = target / "metadata.yaml"
     damaged = _mutated(metadata.read_bytes(), mutation)
-    assume(not _topic_metadata_not_a_mapping(damaged))
     metadata.write_bytes(damaged)
     try:
         _read_everything(target)
@@ -182,8 +165,7 @@ def test_random_cdr_payloads_are_a_damaged_bag_or_counted_samples(
     good = motor_samples(valid_first, faults=False)
     with BagWriter(target) as writer:
         writer.add_topic(MOTOR_STATE_TOPIC, MOTOR_STATE)
-        if valid_first:  # KNOWN ISSUE (docs/stability.md): an empty series raises ValueError
-            write_motor_states(writer, good)
+        write_motor_states(writer, good)  # no messages when valid_first is 0
         times = np.arange(len(data), dtype=np.int64) + 10**9
         writer.write_cdr_many(MOTOR_STATE_TOPIC, times, data)
     try:
@@ -215,12 +197,9 @@ def _check_states(states: list[HealthState]) -> None:
 
 floats = st.floats(allow_nan=True, allow_infinity=True, allow_subnormal=True, width=64)
 plausible = st.floats(-100.0, 100.0)
-#: KNOWN ISSUE (docs/stability.md): a forward jump of the stamps by more than about 1e7 s
-#: (four months; a drive clock switching from boot time to the epoch) makes process() raise
-#: ValueError: the innovation variance after the huge prediction is not positive (math.log),
-#: and beyond about 1.3e8 s the block's prior jam probability rounds to 1 (math.log1p(-1)).
-#: Until it is fixed, fuzzed stamps stay within +-5e5 s (jumps up to 1e6 s, 11.6 days).
-STAMP_LIMIT_S = 5e5
+#: Fuzzed stamps reach decades either side of zero: a forward jump by a drive clock switching
+#: from boot time to the epoch (1.7e9 s) is a gap, never a crash.
+STAMP_LIMIT_S = 4e9
 stamps = st.one_of(
     st.floats(-STAMP_LIMIT_S, STAMP_LIMIT_S), st.sampled_from([math.nan, math.inf, -math.inf])
 )
@@ -232,7 +211,7 @@ def sample_arrays(draw: st.DrawFn) -> MotorSamples:
     jump, repeat or go backwards, in float64, float32, float16 or integer arrays."""
     n = draw(st.integers(1, 200))
     stamp = np.cumsum(draw(hnp.arrays(np.float64, n, elements=st.floats(-0.002, 0.01))))
-    stamp = stamp + draw(st.sampled_from([0.0, 3e5, -5.0]))
+    stamp = stamp + draw(st.sampled_from([0.0, 3e5, -5.0, 1.7e9]))
     columns = [stamp]
     for _ in range(3):
         values = draw(hnp.arrays(np.float64, n, elements=st.one_of(plausible, floats)))
@@ -245,10 +224,6 @@ def sample_arrays(draw: st.DrawFn) -> MotorSamples:
         bad = draw(hnp.arrays(np.float64, n, elements=stamps))
         mask = draw(hnp.arrays(np.bool_, n))
         columns[0] = np.where(mask, bad, stamp)
-    # Stamps come with nanosecond resolution (bags, ROS headers). KNOWN ISSUE
-    # (docs/stability.md): two samples less than about 1e-150 s apart with different speeds
-    # give an acceleration whose square overflows (OverflowError in the measurement model).
-    columns[0] = np.round(columns[0] * 1e9) / 1e9
     return MotorSamples(*columns)
 
 

@@ -45,10 +45,6 @@ from prsm_health.physics.presets import PRESET_NAMES, Preset, load_preset
 RPM = 2.0 * math.pi / 60.0
 #: The load distribution's default tolerance on its scaled residual.
 TOLERANCE = 1e-11
-#: Largest contact force for the fractal table. KNOWN ISSUE (docs/stability.md): its top
-#: entry is F(a_L) of a root solved to 1e-9, a hair below LARGEST_TABLE_LOAD_N, so a force of
-#: exactly LARGEST_TABLE_LOAD_N (documented as allowed) raises DomainError.
-FRACTAL_LARGEST_N = (1.0 - 1e-6) * LARGEST_TABLE_LOAD_N
 #: Up to this share of the radial capacity (the contact-loss limit) every solve converges;
 #: beyond it ConvergenceError is allowed (measured: 30-90 % of cases between 96 % and 99.999 %,
 #: docs/stability.md). The simulator and the estimator stay below half the capacity.
@@ -266,7 +262,7 @@ def test_beyond_the_contact_loss_limit_is_a_domain_error(
     screw=materials,
     roller=materials,
     ra_m=log_uniform(5e-8, 1.6e-6),
-    loads=st.lists(st.floats(0.0, FRACTAL_LARGEST_N), min_size=1, max_size=6),
+    loads=st.lists(st.floats(0.0, LARGEST_TABLE_LOAD_N), min_size=1, max_size=6),
 )
 def test_fractal_contact_solves_or_raises_and_grows_with_load(
     screw: Material, roller: Material, ra_m: float, loads: list[float]
