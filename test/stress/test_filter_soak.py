@@ -11,7 +11,7 @@ Two paths share the update budget (``PRSM_SOAK_UPDATES``, default 1e5; docs/stab
   covariances (from the public snapshot) symmetric positive definite;
 - the jam-hypothesis bank (:class:`JamHypotheses` with :class:`TorqueModel`) on blocks
   directly, EKF, UKF and without pruning: random blocks and adversarial ones (dt from 1 ns to
-  11 days, torques up to 1e6 N m, denormals, float32 rounding, reversals at peak load, load
+  three years, torques up to 1e6 N m, denormals, float32 rounding, reversals at peak load, load
   re-initialisations). Checked after every step: correlation matrices symmetric to round-off,
   positive definite and with a condition number inside the bounds below, probabilities in
   [0, 1] summing to 1.

@@ -1,4 +1,5 @@
-"""Fuzzing the inputs: damaged bag files, random CDR payloads, malformed motor samples.
+"""Fuzzing the inputs: damaged bag files, random CDR payloads, malformed motor samples and
+malformed ROS messages through the node's conversions.
 
 Whatever the bytes, reading a bag ends in data or a typed :class:`BagError` (never another
 exception), and whatever the samples, the estimator rejects and counts what it cannot use
@@ -14,9 +15,13 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+from builtin_interfaces.msg import Time
 from hypothesis import HealthCheck, event, given, settings
 from hypothesis import strategies as st
 from hypothesis.extra import numpy as hnp
+from prsm_health_msgs.msg import MotorState
+from sensor_msgs.msg import JointState
+from std_msgs.msg import Header
 
 from prsm_health.actuator import Actuator
 from prsm_health.bags import (
@@ -35,6 +40,7 @@ from prsm_health.estimation.estimate import HealthState
 from prsm_health.estimation.estimator import HealthEstimator
 from prsm_health.estimation.params import EstimatorParams
 from prsm_health.physics.presets import load_preset
+from prsm_health.ros.messages import JOINT_PROBLEMS, joint_sample, stamp_seconds
 from prsm_health.signals import MotorSamples
 from test.bags.samples import (
     assert_same,
@@ -246,3 +252,61 @@ def test_malformed_samples_are_rejected_and_counted_never_raised(
 def test_samples_of_different_lengths_are_a_value_error() -> None:
     with pytest.raises(ValueError, match="differ in length"):
         MotorSamples(np.zeros(3), np.zeros(3), np.zeros(2), np.zeros(3))
+
+
+# --- the node's input path -------------------------------------------------------------------
+#: Joint names the messages draw from (the node watches "prsm_motor").
+JOINT = "prsm_motor"
+header_stamps = st.builds(
+    Time, sec=st.integers(-(2**31), 2**31 - 1), nanosec=st.integers(0, 2**32 - 1)
+)
+message_floats = st.one_of(plausible, floats)
+motor_messages = st.builds(
+    MotorState,
+    header=st.builds(Header, stamp=header_stamps),
+    current_a=message_floats,
+    speed_rad_s=message_floats,
+    position_rad=message_floats,
+)
+joint_messages = st.builds(
+    JointState,
+    header=st.builds(Header, stamp=header_stamps),
+    name=st.lists(st.sampled_from([JOINT, "wheel", ""]), max_size=3),
+    position=st.lists(message_floats, max_size=3),
+    velocity=st.lists(message_floats, max_size=3),
+    effort=st.lists(message_floats, max_size=3),
+)
+
+
+@settings(max_examples=40, deadline=None)
+@given(
+    messages=st.lists(st.one_of(motor_messages, joint_messages), min_size=1, max_size=300),
+    torque_constant=st.one_of(st.none(), st.floats(0.01, 10.0)),
+)
+def test_malformed_ros_messages_become_rejected_samples_or_joint_problems(
+    messages: list[object], torque_constant: float | None
+) -> None:
+    """Random MotorState and JointState messages (any stamp, any float, joints missing or
+    arrays too short) through the node's conversions (stamp_seconds, joint_sample) into the
+    estimator: every message is a sample or a named joint problem, none raises, every sample
+    is counted and no estimate is non-finite."""
+    rows: list[tuple[float, float, float, float]] = []
+    problems = 0
+    for msg in messages:
+        stamp = stamp_seconds(msg.header.stamp)  # type: ignore[attr-defined]
+        if isinstance(msg, JointState):
+            sample = joint_sample(msg, JOINT, torque_constant)
+            if sample.problem:
+                assert sample.problem in JOINT_PROBLEMS
+                problems += 1
+                continue
+            rows.append((stamp, sample.current_a, sample.speed_rad_s, sample.position_rad))
+        else:
+            rows.append((stamp, msg.current_a, msg.speed_rad_s, msg.position_rad))  # type: ignore[attr-defined]
+    assert len(rows) + problems == len(messages)
+    estimator = HealthEstimator(PARAMS)
+    columns = np.array(rows, dtype=np.float64).reshape(-1, 4).T
+    states = estimator.process(MotorSamples(*columns)) + estimator.finish()
+    _check_states(states)
+    counters = estimator.counters
+    assert counters.accepted + counters.rejected_total == len(rows)
