@@ -6,6 +6,7 @@ Subcommands:
   play, monitor, demo   the ROS tools (prsm_health/ros/tools.py)
   simulate    run a scene of the truth simulator into a rosbag2 MCAP bag
   replay      run the estimator over a bag: summary, --out MCAP, --report, --metrics-json
+  bench       the estimator benchmark: run time against error, floors (docs/performance.md)
 Units at this edge are the engineers' ones (N, rpm, arcmin, mm, um/h); inside all is SI.
 """
 
@@ -58,6 +59,7 @@ def _build_parser() -> _Parser:
     commands = parser.add_subparsers(dest="command", required=True, parser_class=_Parser)
 
     model = commands.add_parser("model", help="evaluate the physics at one operating point")
+    model.set_defaults(handler=_run_model)
     model.add_argument(
         "--preset", required=True, help=f"one of {', '.join(PRESET_NAMES)}, or a YAML file"
     )
@@ -87,6 +89,7 @@ def _build_parser() -> _Parser:
     model.add_argument("--json", action="store_true", help="print one JSON object")
 
     simulate = commands.add_parser("simulate", help="simulate a scene into an MCAP bag")
+    simulate.set_defaults(handler=_run_simulate)
     simulate.add_argument(
         "--scene", required=True, help=f"one of {', '.join(scene_names())}, or a YAML file"
     )
@@ -102,7 +105,10 @@ def _build_parser() -> _Parser:
     simulate.add_argument("--out", required=True, type=Path, metavar="PATH", help="bag directory")
     simulate.add_argument("--force", action="store_true", help="replace an existing bag at PATH")
 
-    commands.add_parser("model-demo", help="model every bundled preset at its largest paper load")
+    model_demo = commands.add_parser(
+        "model-demo", help="model every bundled preset at its largest paper load"
+    )
+    model_demo.set_defaults(handler=_run_model_demo)
     add_ros_commands(commands)
     add_replay_command(commands)
     add_bench_command(commands)
@@ -172,7 +178,9 @@ def _run_model(args: argparse.Namespace) -> int:
         )
     result = evaluate(preset, _point(args))
     if args.json:
-        echoed = {k: v for k, v in vars(args).items() if k not in ("command", "json", "preset")}
+        echoed = {
+            k: v for k, v in vars(args).items() if k not in ("command", "handler", "json", "preset")
+        }
         echoed["misalignment_arcmin"] = list(args.misalignment_arcmin)
         print(json.dumps(result_to_json(preset.name, echoed, result)))
     else:
@@ -180,7 +188,7 @@ def _run_model(args: argparse.Namespace) -> int:
     return 0
 
 
-def _run_demo() -> int:
+def _run_model_demo(_args: argparse.Namespace) -> int:
     for name in PRESET_NAMES:
         preset = load_preset(name)
         point = OperatingPoint(
@@ -226,16 +234,8 @@ def _run_simulate(args: argparse.Namespace) -> int:
 def main(argv: Sequence[str] | None = None) -> int:
     """Run ``prsm-health``; physics errors become a one-line message and exit code 2."""
     args = _build_parser().parse_args(argv)
-    if "ros_command" in args:
-        return int(args.ros_command(args))
     try:
-        if "handler" in args:
-            return int(args.handler(args))
-        if args.command == "model":
-            return _run_model(args)
-        if args.command == "simulate":
-            return _run_simulate(args)
-        return _run_demo()
+        return int(args.handler(args))
     except (PhysicsError, ValueError) as exc:
         print(f"prsm-health: error: {exc}", file=sys.stderr)
         return EXIT_USAGE

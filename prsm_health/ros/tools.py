@@ -1,6 +1,6 @@
 """The ROS subcommands of ``prsm-health``: play, monitor, demo.
 
-:func:`add_ros_commands` registers them on the CLI's subparsers; each sets ``ros_command`` to
+:func:`add_ros_commands` registers them on the CLI's subparsers; each sets ``handler`` to
 its runner. rclpy is imported only when one of them runs, so ``prsm-health model`` works
 without ROS.
 """
@@ -55,14 +55,14 @@ def add_ros_commands(commands: argparse._SubParsersAction[Parser]) -> None:
         metavar="S",
         help="wait up to S seconds for a subscriber on every played topic (default: no wait)",
     )
-    play.set_defaults(ros_command=_run_play)
+    play.set_defaults(handler=_run_play)
 
     monitor = commands.add_parser("monitor", help="live table of the node's health/diagnostics")
     monitor.add_argument("--node", default="/prsm_health", help="node name (default /prsm_health)")
     monitor.add_argument("--json", action="store_true", help="one JSON object per message")
     monitor.add_argument("--count", type=_count, default=0, metavar="N", help="stop after N")
     monitor.add_argument("--timeout", type=_non_negative, default=0.0, metavar="S")
-    monitor.set_defaults(ros_command=_run_monitor)
+    monitor.set_defaults(handler=_run_monitor)
 
     demo = commands.add_parser("demo", help="node + bag + monitor on loopback, then a summary")
     demo.add_argument("--bag", type=Path, default=DEMO_BAG, help=f"default {DEMO_BAG}")
@@ -71,7 +71,7 @@ def add_ros_commands(commands: argparse._SubParsersAction[Parser]) -> None:
         "--timeout", type=_positive, default=300.0, metavar="S", help="hard limit (default 300)"
     )
     demo.add_argument("--workdir", type=Path, default=Path("build", "demo"), metavar="DIR")
-    demo.set_defaults(ros_command=_run_demo)
+    demo.set_defaults(handler=_run_demo)
 
 
 def _run_play(args: argparse.Namespace) -> int:
