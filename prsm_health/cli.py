@@ -16,6 +16,7 @@ import argparse
 import dataclasses
 import json
 import math
+import os
 import sys
 from collections.abc import Sequence
 from pathlib import Path
@@ -36,6 +37,8 @@ from prsm_health.scenes.scene import load_scene, scene_names
 from prsm_health.scenes.simulator import Simulator
 
 EXIT_USAGE = 2
+#: Exit code after the reader of stdout went away (128 + SIGPIPE, as the shell reports it).
+EXIT_BROKEN_PIPE = 141
 RPM_TO_RAD_S = 2.0 * math.pi / 60.0
 M_PER_S_TO_UM_PER_H = 1e6 * 3600.0
 
@@ -239,6 +242,9 @@ def main(argv: Sequence[str] | None = None) -> int:
     except (PhysicsError, ValueError) as exc:
         print(f"prsm-health: error: {exc}", file=sys.stderr)
         return EXIT_USAGE
+    except BrokenPipeError:  # the reader left (``| head``): stop quietly, as cat does
+        os.dup2(os.open(os.devnull, os.O_WRONLY), sys.stdout.fileno())
+        return EXIT_BROKEN_PIPE
 
 
 if __name__ == "__main__":

@@ -3,6 +3,9 @@
 from __future__ import annotations
 
 import json
+import os
+import subprocess
+import sys
 
 import pytest
 
@@ -87,3 +90,22 @@ def test_invalid_arguments_give_one_line_and_exit_2(
     assert code == 2
     assert len(err.strip().splitlines()) == 1
     assert err.startswith("prsm-health")
+
+
+def test_a_reader_that_left_ends_the_output_quietly() -> None:
+    """``prsm-health model-demo | head -1``, with the reader gone before the first write (a
+    pipe whose read end is closed): exit 141 and no traceback."""
+    read_end, write_end = os.pipe()
+    os.close(read_end)
+    try:
+        result = subprocess.run(
+            [sys.executable, "-m", "prsm_health.cli", "model-demo"],
+            stdout=write_end,
+            stderr=subprocess.PIPE,
+            timeout=60,
+            check=False,
+        )
+    finally:
+        os.close(write_end)
+    assert result.returncode == 141, result.stderr
+    assert b"Traceback" not in result.stderr
