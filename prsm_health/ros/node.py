@@ -77,7 +77,9 @@ from prsm_health.signals import MotorSamples
 from prsm_health.tracking import DiagnosticsTracker, rejected_by_reason
 
 NS_PER_S = 1e9
-HEALTH_QOS_DEPTH = 100
+#: Estimates kept for reliable subscribers: 20 s at 50 Hz (a replay at twice the speed), longer
+#: than Fast DDS takes to repair a lost message (its 3 s heartbeat), so none is overwritten first.
+HEALTH_QOS_DEPTH = 1000
 DIAGNOSTICS_QOS_DEPTH = 10
 #: How often the main loop returns to Python to see a SIGINT/SIGTERM [s].
 SPIN_TIMEOUT_S = 0.1

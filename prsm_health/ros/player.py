@@ -11,8 +11,9 @@ keep ``PUBLISHER_DEPTH`` messages.
 ``/clock`` if published) has a subscriber (at most that long; error otherwise), then
 :data:`SETTLE_S` more so that the subscriber side of discovery completes too: a best-effort
 subscriber drops what arrives before it has matched the publisher. At the end the player
-waits for reliable subscribers to acknowledge everything (up to Fast DDS's heartbeat period,
-3 s), so a short bag is not cut off; best-effort subscribers are not waited for.
+waits for reliable subscribers to acknowledge everything (at most ``ACK_TIMEOUT_S``), so a
+short bag is not cut off, and reports the topics they did not; best-effort subscribers are not
+waited for.
 """
 
 from __future__ import annotations
@@ -40,8 +41,9 @@ PUBLISHER_DEPTH = 10_000
 #: After the publishers have matched their subscribers, time for the subscribers to match
 #: the publishers [s].
 SETTLE_S = 0.3
-#: How long the end of the play waits for acknowledgements [s].
-ACK_TIMEOUT_S = 5.0
+#: How long the end of the play waits for acknowledgements [s]: Fast DDS repairs a lost
+#: message at its heartbeat (every 3 s), later on a starved machine.
+ACK_TIMEOUT_S = 10.0
 NS_PER_S = 1e9
 
 
@@ -73,12 +75,14 @@ class PlayOptions:
 
 @dataclass
 class PlayReport:
-    """Messages published per topic, passes through the bag, and the largest lateness [s]."""
+    """Messages published per topic, passes through the bag, the largest lateness [s], and
+    the topics whose reliable subscribers had not acknowledged everything at the end."""
 
     published: Counter[str] = field(default_factory=Counter)
     passes: int = 0
     max_late_s: float = 0.0
     interrupted: bool = False
+    unacknowledged: list[str] = field(default_factory=list)
 
 
 class _Clock:
@@ -160,8 +164,10 @@ def _play(reader: Reader, options: PlayOptions, stop: threading.Event) -> PlayRe
                 break
         report.interrupted = stop.is_set()
         for topic, publisher in publishers.items():
-            if _has_reliable_subscriber(node, topic):
-                publisher.wait_for_all_acked(Duration(seconds=ACK_TIMEOUT_S))
+            if not _has_reliable_subscriber(node, topic):
+                continue
+            if not publisher.wait_for_all_acked(Duration(seconds=ACK_TIMEOUT_S)):
+                report.unacknowledged.append(topic)
         return report
     finally:
         node.destroy_node()

@@ -75,7 +75,7 @@ def add_ros_commands(commands: argparse._SubParsersAction[Parser]) -> None:
 
 
 def _run_play(args: argparse.Namespace) -> int:
-    from prsm_health.ros.player import PlayError, PlayOptions, play
+    from prsm_health.ros.player import ACK_TIMEOUT_S, PlayError, PlayOptions, play
     from prsm_health.ros.runtime import ros_session
 
     try:
@@ -98,6 +98,13 @@ def _run_play(args: argparse.Namespace) -> int:
         f"play {state}: {topics or 'nothing'} published in {report.passes} pass(es);"
         f" largest lateness {report.max_late_s * 1e3:.1f} ms"
     )
+    if report.unacknowledged:
+        print(
+            f"prsm-health play: error: not acknowledged by every reliable subscriber within"
+            f" {ACK_TIMEOUT_S:g} s: {', '.join(report.unacknowledged)} (messages may be lost)",
+            file=sys.stderr,
+        )
+        return 1
     return 0
 
 

@@ -77,7 +77,13 @@ def run(ros: None, tmp_path_factory: pytest.TempPathFactory) -> Run:
         ) as node:
             node.wait_log("configured")
             output = play(bag, "--rate", "2", "--clock", listener=listener)
-            listener.wait_for(lambda: len(listener.health) >= len(offline), 20.0, "every estimate")
+            try:
+                listener.wait_for(
+                    lambda: len(listener.health) >= len(offline), 20.0, "every estimate"
+                )
+            except AssertionError as exc:
+                counts = f"{len(listener.health)} of {len(offline)} estimates received"
+                raise AssertionError(f"{exc}: {counts}\n{output}\n{node.log()}") from exc
             listener.spin(0.5)  # the last diagnostics (sim time stops with the bag)
             assert node.alive(), node.log()
         # The node saved its state at shutdown, with its input counters.

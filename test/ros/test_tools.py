@@ -6,6 +6,7 @@ import re
 import signal
 import subprocess
 import sys
+import time
 from pathlib import Path
 
 import pytest
@@ -15,8 +16,9 @@ from rclpy.qos import QoSProfile, QoSReliabilityPolicy
 from prsm_health.outputs import Level
 from prsm_health.ros.messages import stamp_seconds
 from prsm_health.ros.monitor import table
+from prsm_health.ros.player import ACK_TIMEOUT_S
 from test.ros.data import short_jam_scene, simulated_bag, synthetic_run, write_bag
-from test.ros.harness import Listener, start_player, stop_process
+from test.ros.harness import Listener, NodeProcess, start_player, stop_process
 
 
 def cli(*args: str, timeout_s: float = 60.0) -> subprocess.CompletedProcess[str]:
@@ -75,6 +77,26 @@ def test_play_loops_until_interrupted(ros: None, tmp_path: Path) -> None:
     assert passes >= 3
     assert 200 * (passes - 1) <= published <= 200 * passes
     assert received[:200] == received[200:400]  # the same stamps again: a loop, not a shift
+
+
+def test_play_names_what_a_reliable_subscriber_did_not_acknowledge(tmp_path: Path) -> None:
+    """A node subscribing reliably is frozen (SIGSTOP) while the bag plays: its DDS threads
+    acknowledge nothing more, so the player waits ACK_TIMEOUT_S, names the topic, exits 1."""
+    bag = write_bag(tmp_path / "bag", synthetic_run(2.0))
+    with NodeProcess(tmp_path, input_qos="reliable", input_queue_depth=10_000) as node:
+        node.wait_log("configured")
+        player = start_player(bag, "--rate", "1")
+        try:
+            time.sleep(1.5)  # matched and playing (the player waits for the subscription)
+            node.process.send_signal(signal.SIGSTOP)
+            out, _ = player.communicate(timeout=60)
+        finally:
+            node.process.send_signal(signal.SIGCONT)
+            stop_process(player)
+    assert player.returncode == 1, out
+    assert "play done: /motor_state 2000 published" in out
+    assert f"not acknowledged by every reliable subscriber within {ACK_TIMEOUT_S:g} s" in out
+    assert out.rstrip().endswith("/motor_state (messages may be lost)")
 
 
 def test_monitor_times_out_without_a_node() -> None:
