@@ -72,6 +72,13 @@ NEGLIGIBLE_LOG_PROBABILITY = math.log(1e-6)
 #: must not declare a jam.
 LONGEST_PREDICTION_S = 1.0
 
+#: An EKF update that moves the load by more than this share of the rated load is checked
+#: for linearisation error, and iterated if the model misses the measurement at the updated
+#: state by more than ITERATION_SIGMAS of the measurement noise (JamHypotheses._ekf_update).
+LARGE_UPDATE_RATIO = 0.02
+ITERATION_SIGMAS = 3.0
+MAX_ITERATIONS = 3
+
 #: Smallest variance kept on each state, relative to its initial variance.
 VARIANCE_FLOOR_RATIO = 1e-12
 
@@ -150,6 +157,7 @@ class JamHypotheses:
         self._rate_per_s = params.model.jam_rate_per_h / 3600.0
         self._prune = params.fidelity.prune_hypotheses
         rated = params.rated_load_n
+        self._large_update_n = LARGE_UPDATE_RATIO * rated
         initial = np.zeros(self._dim)
         initial[LOAD] = rated**2
         initial[LOAD_RATE] = rated**2  # the full load within a second
@@ -314,12 +322,7 @@ class JamHypotheses:
             if isinstance(kf, UnscentedKalmanFilter):
                 kf.update(z, R=np.array([[variance]]), hx=self._hx(block, h.count, h.fresh))
             else:
-                kf.update(
-                    z,
-                    HJacobian=_constant(jacobian[None, :]),
-                    Hx=_constant(np.array([mean])),
-                    R=np.array([[variance]]),
-                )
+                self._ekf_update(kf, z, block, h, (mean, jacobian, variance))
             innovation = float(kf.y[0])
             spread = float(kf.S[0, 0])
             nis.append(innovation**2 / spread)
@@ -340,6 +343,45 @@ class JamHypotheses:
             significant = h.log_prob > NEGLIGIBLE_LOG_PROBABILITY and not gated
             predictions.append(self._model.predict(kf.x, block, h.count) if significant else prior)
         return StepResult(predictions=predictions, nis=nis, gated=gated)
+
+    def _ekf_update(
+        self,
+        kf: Filter,
+        z: FloatArray,
+        block: Block,
+        h: Hypothesis,
+        linearised: tuple[float, FloatArray, float],
+    ) -> None:
+        """EKF update from the prior, iterated (Gauss-Newton, the iterated EKF) when it moved
+        the load by more than LARGE_UPDATE_RATIO of the rated load and the model misses the
+        measurement at the updated state by more than ITERATION_SIGMAS of its noise.
+
+        Such an update follows a re-acquisition (after a hole in the data the prior stays at
+        the last load while the torque says another): linearised tens of kN away, a single
+        update lands hundreds of newtons off with a standard deviation of tens. Each iteration
+        re-linearises at the latest state x_i and updates the prior with the measurement
+        prediction h(x_i) + H_i (x_prior - x_i), at most MAX_ITERATIONS times.
+        """
+        x_prior = kf.x.copy()
+        p_prior = kf.P.copy()
+        x_lin = x_prior
+        mean, jacobian, variance = linearised
+        for iteration in range(MAX_ITERATIONS + 1):
+            kf.x, kf.P = x_prior.copy(), p_prior.copy()
+            predicted = mean + float(jacobian @ (x_prior - x_lin))
+            kf.update(
+                z,
+                HJacobian=_constant(jacobian[None, :]),
+                Hx=_constant(np.array([predicted])),
+                R=np.array([[variance]]),
+            )
+            moved = abs(float(kf.x[LOAD] - x_prior[LOAD]))
+            if iteration == MAX_ITERATIONS or moved <= self._large_update_n:
+                return
+            _, mean, jacobian, variance = self._measurement(kf.x, block, h.count, h.fresh)
+            if (float(z[0]) - mean) ** 2 <= ITERATION_SIGMAS**2 * variance:
+                return
+            x_lin = kf.x.copy()
 
     def _measurement(
         self, x: FloatArray, block: Block, jammed: int, fresh: bool

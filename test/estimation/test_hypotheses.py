@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import dataclasses
 import math
 
 import numpy as np
@@ -9,6 +10,7 @@ import pytest
 from filterpy.kalman import IMMEstimator, KalmanFilter
 
 from prsm_health.actuator import Actuator
+from prsm_health.estimation import hypotheses
 from prsm_health.estimation.hypotheses import (
     Hypothesis,
     JamHypotheses,
@@ -121,3 +123,44 @@ def test_pruning_keeps_the_likely_counts_and_the_next_one() -> None:
     bank.step(moving_block(4.0, rng), jerk_psd=5e12)
     assert sorted(h.count for h in bank.hypotheses) == [0, 1]  # 1: a jam in this block
     assert [h.fresh for h in bank.hypotheses] == [False, True]
+
+
+@pytest.mark.parametrize("iterations", [0, hypotheses.MAX_ITERATIONS])
+def test_a_large_update_is_iterated_until_the_model_meets_the_measurement(
+    iterations: int, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    """After a hole the load prior stays at the last load (10 % of rated) while the torque says
+    80 %: one EKF update, linearised that far away, misses the measurement at its own result
+    by many standard deviations; the iterated update meets it (and 0 iterations shows the
+    miss, so the test can tell)."""
+    monkeypatch.setattr(hypotheses, "MAX_ITERATIONS", iterations)
+    p = params(prune_hypotheses=True)
+    model = TorqueModel(p)
+    bank = JamHypotheses(p, model)
+    rng = np.random.default_rng(2)
+
+    def block(torque_nm: float, duration_s: float) -> Block:
+        return dataclasses.replace(
+            moving_block(torque_nm, rng),
+            duration_s=duration_s,
+            motor_speed_rad_s=150.0,
+            direction=1,
+        )
+
+    low = model.predict(np.r_[0.1 * p.rated_load_n, np.zeros(model.dim - 1)], block(0.0, 0.04), 0)
+    for _ in range(50):
+        bank.step(block(low.motor_torque_nm, 0.04), jerk_psd=5e11, evidence=False)
+    high = model.predict(np.r_[0.8 * p.rated_load_n, np.zeros(model.dim - 1)], block(0.0, 0.04), 0)
+    bank.reinitialise_load(keep_load=True)
+    after_hole = block(high.motor_torque_nm, 0.5)
+    bank.step(after_hole, jerk_psd=5e12, evidence=False)
+    (h,) = [h for h in bank.hypotheses if h.count == 0]
+    at_result = model.predict(h.filter.x, after_hole, 0)
+    miss_sigmas = abs(at_result.motor_torque_nm - high.motor_torque_nm) / math.sqrt(
+        at_result.variance_nm2
+    )
+    if iterations:
+        assert miss_sigmas <= hypotheses.ITERATION_SIGMAS
+        assert h.filter.x[0] == pytest.approx(0.8 * p.rated_load_n, rel=0.01)
+    else:
+        assert miss_sigmas > 2.0 * hypotheses.ITERATION_SIGMAS
