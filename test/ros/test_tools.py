@@ -6,7 +6,6 @@ import re
 import signal
 import subprocess
 import sys
-import time
 from pathlib import Path
 
 import pytest
@@ -79,22 +78,33 @@ def test_play_loops_until_interrupted(ros: None, tmp_path: Path) -> None:
     assert received[:200] == received[200:400]  # the same stamps again: a loop, not a shift
 
 
-def test_play_names_what_a_reliable_subscriber_did_not_acknowledge(tmp_path: Path) -> None:
+def test_play_names_what_a_reliable_subscriber_did_not_acknowledge(
+    ros: None, tmp_path: Path
+) -> None:
     """A node subscribing reliably is frozen (SIGSTOP) while the bag plays: its DDS threads
     acknowledge nothing more, so the player waits ACK_TIMEOUT_S, names the topic, exits 1."""
-    bag = write_bag(tmp_path / "bag", synthetic_run(2.0))
-    with NodeProcess(tmp_path, input_qos="reliable", input_queue_depth=10_000) as node:
-        node.wait_log("configured")
-        player = start_player(bag, "--rate", "1")
-        try:
-            time.sleep(1.5)  # matched and playing (the player waits for the subscription)
-            node.process.send_signal(signal.SIGSTOP)
-            out, _ = player.communicate(timeout=60)
-        finally:
-            node.process.send_signal(signal.SIGCONT)
-            stop_process(player)
+    bag = write_bag(tmp_path / "bag", synthetic_run(3.0))
+    graph = Listener()  # sees the node's subscription and the player's publisher
+    try:
+        with NodeProcess(tmp_path, input_qos="reliable", input_queue_depth=10_000) as node:
+            graph.wait_for(
+                lambda: graph.node.count_subscribers("/motor_state") >= 1, 30.0, "the node"
+            )
+            player = start_player(bag, "--rate", "1")
+            try:
+                graph.wait_for(
+                    lambda: graph.node.count_publishers("/motor_state") >= 1, 30.0, "the player"
+                )
+                graph.spin(1.5)  # the player matches the node, settles, and plays
+                node.process.send_signal(signal.SIGSTOP)
+                out, _ = player.communicate(timeout=60)
+            finally:
+                node.process.send_signal(signal.SIGCONT)
+                stop_process(player)
+    finally:
+        graph.close()
     assert player.returncode == 1, out
-    assert "play done: /motor_state 2000 published" in out
+    assert "play done: /motor_state 3000 published" in out
     assert f"not acknowledged by every reliable subscriber within {ACK_TIMEOUT_S:g} s" in out
     assert out.rstrip().endswith("/motor_state (messages may be lost)")
 
