@@ -424,9 +424,9 @@ def common_runs(results: BenchResults, kind: str) -> dict[str, list[Run]]:
     return {c: [r for r in runs if r.scene in shared] for c, runs in by_config.items()}
 
 
-def _summary(results: BenchResults) -> list[str]:
+def _summary(results: BenchResults, common: dict[str, list[Run]]) -> list[str]:
     rows = []
-    for config, runs in common_runs(results, "full").items():
+    for config, runs in common.items():
         timing = pooled_timing(runs)
         samples = sum(r.samples for r in runs)
         chunked = sum(r.chunked_s or 0.0 for r in runs)
@@ -594,7 +594,7 @@ def markdown(results: BenchResults, found: list[Floor]) -> str:
         + (f"; not {', '.join(left_out)}" if left_out else "")
         + ")",
         "",
-        *_summary(results),
+        *_summary(results, common),
     ]
     lines += ["", "## Bags: replay against rosbags' bare decode", "", *_decode(results)]
     if results.runs_of(kind="excerpt"):
@@ -629,12 +629,12 @@ def pareto(results: BenchResults, path: Path) -> None:
             f"{len(results.plan['naive_scenes'])} bags (naive too)",
         ),
     ]
-    panels = [(kind, title) for kind, title in panels if common_runs(results, kind)]
-    figure, axes = plt.subplots(1, len(panels), figsize=(5.0 * len(panels), 4.5), squeeze=False)
-    for axis, (kind, title) in zip(axes[0], panels, strict=True):
+    plotted = [(title, runs) for kind, title in panels if (runs := common_runs(results, kind))]
+    figure, axes = plt.subplots(1, len(plotted), figsize=(5.0 * len(plotted), 4.5), squeeze=False)
+    for axis, (title, by_config) in zip(axes[0], plotted, strict=True):
         points = sorted(
             (pooled_timing(runs).mean_us, pooled_rmse_percent(runs), config)
-            for config, runs in common_runs(results, kind).items()
+            for config, runs in by_config.items()
         )
         axis.set_xscale("log")
         axis.set_yscale("log")

@@ -362,12 +362,12 @@ class JamHypotheses:
         re-linearises at the latest state x_i and updates the prior with the measurement
         prediction h(x_i) + H_i (x_prior - x_i), at most MAX_ITERATIONS times.
         """
-        x_prior = kf.x.copy()
-        p_prior = kf.P.copy()
+        x_prior = kf.x_prior  # filterpy's copy of the predicted state (P_prior likewise)
         x_lin = x_prior
         mean, jacobian, variance = linearised
         for iteration in range(MAX_ITERATIONS + 1):
-            kf.x, kf.P = x_prior.copy(), p_prior.copy()
+            if iteration:
+                kf.x, kf.P = x_prior.copy(), kf.P_prior.copy()
             predicted = mean + float(jacobian @ (x_prior - x_lin))
             kf.update(
                 z,
