@@ -82,7 +82,12 @@ def run(ros: None, tmp_path_factory: pytest.TempPathFactory) -> Run:
                     lambda: len(listener.health) >= len(offline), 20.0, "every estimate"
                 )
             except AssertionError as exc:
-                counts = f"{len(listener.health)} of {len(offline)} estimates received"
+                received = {h["stamp"] for h in listener.health}
+                missing = [o["stamp"] for o in offline if o["stamp"] not in received]
+                counts = (
+                    f"{len(listener.health)} of {len(offline)} estimates received, "
+                    f"missing stamps {missing}"
+                )
                 raise AssertionError(f"{exc}: {counts}\n{output}\n{node.log()}") from exc
             listener.spin(0.5)  # the last diagnostics (sim time stops with the bag)
             assert node.alive(), node.log()
