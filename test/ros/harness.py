@@ -126,8 +126,14 @@ class Listener:
         self.health: list[dict[str, Any]] = []
         self.diagnostics: list[dict[str, Any]] = []
         qos = QoSProfile(depth=1000, reliability=QoSReliabilityPolicy.RELIABLE)
-        self.node.create_subscription(HealthEstimate, f"/{node_name}/health", self._on_health, qos)
-        self.node.create_subscription(DiagnosticArray, "/diagnostics", self._on_diagnostics, qos)
+        self._subscriptions = [
+            self.node.create_subscription(
+                HealthEstimate, f"/{node_name}/health", self._on_health, qos
+            ),
+            self.node.create_subscription(
+                DiagnosticArray, "/diagnostics", self._on_diagnostics, qos
+            ),
+        ]
         self.executor = SingleThreadedExecutor()
         self.executor.add_node(self.node)
 
@@ -156,6 +162,15 @@ class Listener:
         while not condition():
             assert time.monotonic() < deadline, f"timed out after {timeout_s} s waiting for {what}"
             self.executor.spin_once(timeout_sec=0.02)
+
+    def wait_matched(self, timeout_s: float = 20.0) -> None:
+        """Receive until both subscriptions are matched with a publisher (what is published
+        before that is not delivered: the node's publishers are volatile)."""
+        self.wait_for(
+            lambda: all(s.get_publisher_count() > 0 for s in self._subscriptions),
+            timeout_s,
+            "the node's health and diagnostics publishers",
+        )
 
     def statuses_of(self, hardware_id: str) -> list[dict[str, dict[str, Any]]]:
         """The statuses (name -> status) of ``hardware_id`` in each diagnostics message."""

@@ -76,6 +76,7 @@ def run(ros: None, tmp_path_factory: pytest.TempPathFactory) -> Run:
             input_queue_depth=10_000,
         ) as node:
             node.wait_log("configured")
+            listener.wait_matched()
             output = play(bag, "--rate", "2", "--clock", listener=listener)
             try:
                 listener.wait_for(
