@@ -15,7 +15,7 @@ from typing import Any
 
 from builtin_interfaces.msg import Time
 from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus, KeyValue
-from prsm_health_msgs.msg import HealthEstimate
+from prsm_health_msgs.msg import HealthEstimate, MotorState
 
 from prsm_health.outputs import DiagnosticStatusData
 
@@ -40,32 +40,38 @@ def time_msg(seconds: float) -> Time:
 
 
 @dataclass(frozen=True)
-class JointSample:
-    """One motor sample taken from a JointState, or why it could not be (``problem``)."""
+class InputSample:
+    """One motor sample taken from an input message, or why it could not be (``problem``)."""
 
+    stamp_s: float = math.nan
     current_a: float = math.nan
     speed_rad_s: float = math.nan
     position_rad: float = math.nan
     problem: str = ""
 
 
-def joint_sample(msg: Any, joint: str, torque_constant_nm_per_a: float | None) -> JointSample:
-    """The named joint's effort, velocity and position as a motor sample.
+def input_sample(msg: Any, joint: str, torque_constant_nm_per_a: float | None) -> InputSample:
+    """A ``MotorState``, or the named joint of a ``JointState``, as a motor sample.
 
-    ``torque_constant_nm_per_a``: None if the effort is the current, else k_t (the effort is
-    the motor torque). Problems: ``joint_missing`` (no such name), ``joint_incomplete`` (the
-    effort, velocity or position array is too short for the joint's index).
+    The values are taken as they are (the estimator judges them). For a JointState:
+    effort, velocity and position of ``joint``; ``torque_constant_nm_per_a`` None if the
+    effort is the current, else k_t (the effort is the motor torque). Problems:
+    ``joint_missing`` (no such name), ``joint_incomplete`` (the effort, velocity or position
+    array is too short for the joint's index).
     """
+    stamp = stamp_seconds(msg.header.stamp)
+    if isinstance(msg, MotorState):
+        return InputSample(stamp, msg.current_a, msg.speed_rad_s, msg.position_rad)
     try:
         index = list(msg.name).index(joint)
     except ValueError:
-        return JointSample(problem=JOINT_PROBLEMS[0])
+        return InputSample(problem=JOINT_PROBLEMS[0])
     arrays = (msg.effort, msg.velocity, msg.position)
     if any(len(values) <= index for values in arrays):
-        return JointSample(problem=JOINT_PROBLEMS[1])
+        return InputSample(problem=JOINT_PROBLEMS[1])
     effort = float(msg.effort[index])
     current = effort if torque_constant_nm_per_a is None else effort / torque_constant_nm_per_a
-    return JointSample(current, float(msg.velocity[index]), float(msg.position[index]))
+    return InputSample(stamp, current, float(msg.velocity[index]), float(msg.position[index]))
 
 
 def health_estimate(fields: dict[str, Any], stamp_s: float, frame_id: str) -> Any:

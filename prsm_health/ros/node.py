@@ -59,8 +59,7 @@ from prsm_health.ros.messages import (
     JOINT_PROBLEMS,
     diagnostic_array,
     health_estimate,
-    joint_sample,
-    stamp_seconds,
+    input_sample,
 )
 from prsm_health.ros.parameters import (
     NODE_NAME,
@@ -257,11 +256,11 @@ class HealthNode(LifecycleNode):
         )
         if config.input_type == "motor_state":
             self._subscription = self.create_subscription(
-                MotorState, config.input_topic, self._on_motor_state, qos
+                MotorState, config.input_topic, self._on_input, qos
             )
         else:
             self._subscription = self.create_subscription(
-                JointState, config.input_topic, self._on_joint_state, qos
+                JointState, config.input_topic, self._on_input, qos
             )
         self._timers = [
             self.create_timer(config.batch_period_s, self._on_batch, clock=self._steady),
@@ -325,16 +324,7 @@ class HealthNode(LifecycleNode):
     def _now_s(self) -> float:
         return float(self.get_clock().now().nanoseconds) / NS_PER_S
 
-    def _on_motor_state(self, msg: Any) -> None:
-        try:
-            self._pending.add(
-                stamp_seconds(msg.header.stamp), msg.current_a, msg.speed_rad_s, msg.position_rad
-            )
-            self._frame_id = msg.header.frame_id
-        except Exception as exc:
-            self._fault("MotorState input", exc)
-
-    def _on_joint_state(self, msg: Any) -> None:
+    def _on_input(self, msg: Any) -> None:
         try:
             config = self._config
             if config is None:
@@ -344,20 +334,17 @@ class HealthNode(LifecycleNode):
                 if config.effort_is == "current"
                 else config.estimator.actuator.drive_train.torque_constant_nm_per_a
             )
-            sample = joint_sample(msg, config.joint_name, k_t)
+            sample = input_sample(msg, config.joint_name, k_t)
             if sample.problem:
                 self._node_rejects[sample.problem] += 1
                 self._pending.received += 1
                 return
             self._pending.add(
-                stamp_seconds(msg.header.stamp),
-                sample.current_a,
-                sample.speed_rad_s,
-                sample.position_rad,
+                sample.stamp_s, sample.current_a, sample.speed_rad_s, sample.position_rad
             )
             self._frame_id = msg.header.frame_id
         except Exception as exc:
-            self._fault("JointState input", exc)
+            self._fault(f"{type(msg).__name__} input", exc)
 
     def _fault(self, where: str, exc: BaseException) -> None:
         events = self._tracker.events

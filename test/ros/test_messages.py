@@ -6,14 +6,16 @@ import math
 
 import pytest
 from builtin_interfaces.msg import Time
+from prsm_health_msgs.msg import MotorState
 from sensor_msgs.msg import JointState
+from std_msgs.msg import Header
 
 from prsm_health.outputs import DiagnosticStatusData, Level
 from prsm_health.ros.messages import (
-    JointSample,
+    InputSample,
     diagnostic_array,
     health_estimate,
-    joint_sample,
+    input_sample,
     stamp_seconds,
     time_msg,
 )
@@ -28,19 +30,23 @@ def test_stamps() -> None:
     assert time_msg(math.nan) == Time() == time_msg(-1.0)
 
 
-def test_joint_sample() -> None:
+def test_input_sample() -> None:
+    header = Header(stamp=Time(sec=4, nanosec=500_000_000))
     msg = JointState(
+        header=header,
         name=["wheel", "prsm_motor"],
         position=[0.0, 3.0],
         velocity=[0.0, 150.0],
         effort=[0.0, 1.2],
     )
-    assert joint_sample(msg, "prsm_motor", None) == JointSample(1.2, 150.0, 3.0)
-    torque = joint_sample(msg, "prsm_motor", 0.6)
+    assert input_sample(msg, "prsm_motor", None) == InputSample(4.5, 1.2, 150.0, 3.0)
+    torque = input_sample(msg, "prsm_motor", 0.6)
     assert torque.current_a == pytest.approx(2.0)
-    assert joint_sample(msg, "other", None).problem == "joint_missing"
+    assert input_sample(msg, "other", None).problem == "joint_missing"
     msg.velocity = [0.0]
-    assert joint_sample(msg, "prsm_motor", None).problem == "joint_incomplete"
+    assert input_sample(msg, "prsm_motor", None).problem == "joint_incomplete"
+    motor = MotorState(header=header, current_a=1.5, speed_rad_s=-20.0, position_rad=7.0)
+    assert input_sample(motor, "prsm_motor", 0.6) == InputSample(4.5, 1.5, -20.0, 7.0)
 
 
 def test_output_messages() -> None:

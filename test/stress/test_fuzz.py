@@ -40,7 +40,7 @@ from prsm_health.estimation.estimate import HealthState
 from prsm_health.estimation.estimator import HealthEstimator
 from prsm_health.estimation.params import EstimatorParams
 from prsm_health.physics.presets import load_preset
-from prsm_health.ros.messages import JOINT_PROBLEMS, joint_sample, stamp_seconds
+from prsm_health.ros.messages import JOINT_PROBLEMS, input_sample
 from prsm_health.signals import MotorSamples
 from test.bags.samples import (
     assert_same,
@@ -287,22 +287,18 @@ def test_malformed_ros_messages_become_rejected_samples_or_joint_problems(
     messages: list[object], torque_constant: float | None
 ) -> None:
     """Random MotorState and JointState messages (any stamp, any float, joints missing or
-    arrays too short) through the node's conversions (stamp_seconds, joint_sample) into the
+    arrays too short) through the node's conversion (input_sample) into the
     estimator: every message is a sample or a named joint problem, none raises, every sample
     is counted and no estimate is non-finite."""
     rows: list[tuple[float, float, float, float]] = []
     problems = 0
     for msg in messages:
-        stamp = stamp_seconds(msg.header.stamp)  # type: ignore[attr-defined]
-        if isinstance(msg, JointState):
-            sample = joint_sample(msg, JOINT, torque_constant)
-            if sample.problem:
-                assert sample.problem in JOINT_PROBLEMS
-                problems += 1
-                continue
-            rows.append((stamp, sample.current_a, sample.speed_rad_s, sample.position_rad))
-        else:
-            rows.append((stamp, msg.current_a, msg.speed_rad_s, msg.position_rad))  # type: ignore[attr-defined]
+        sample = input_sample(msg, JOINT, torque_constant)
+        if sample.problem:
+            assert isinstance(msg, JointState) and sample.problem in JOINT_PROBLEMS
+            problems += 1
+            continue
+        rows.append((sample.stamp_s, sample.current_a, sample.speed_rad_s, sample.position_rad))
     assert len(rows) + problems == len(messages)
     estimator = HealthEstimator(PARAMS)
     columns = np.array(rows, dtype=np.float64).reshape(-1, 4).T
