@@ -301,7 +301,7 @@ def _radial_sensitivity(params: EstimatorParams) -> float:
     if not params.radial_terms or std == 0.0:
         return 0.0
     preset = params.actuator.preset
-    upper = min(ratio + std, 0.9 * radial_capacity_ratio(preset.geometry))
+    upper = min(ratio + std, 0.9 * float(radial_capacity_ratio(preset.geometry)))
     nominal, shifted = (
         float(
             physics_averages(

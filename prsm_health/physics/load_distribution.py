@@ -162,15 +162,36 @@ def _clearance(value: ArrayLike | None, geometry: Geometry, name: str) -> FloatA
     return np.asarray(array - array.min(), dtype=np.float64)
 
 
-def radial_capacity_ratio(geometry: Geometry) -> float:
-    """Upper bound of F_r / F_a that loaded-flank contacts can balance (000 eq. 12).
+def radial_capacity_ratio(
+    geometry: Geometry, carrier_angle_rad: ArrayLike = 0.0, radial_load_angle_rad: ArrayLike = 0.0
+) -> FloatArray:
+    """Largest F_r / F_a that loaded-flank contacts can balance (000 eq. 12), at a carrier
+    angle and a direction of the radial load (broadcast).
 
-    A roller's contacts push the screw radially by cos(beta) / (sin(beta) cos(lambda)) times
-    their axial load, so even with every load on rollers facing the radial load,
-    F_r < F_a cos(beta) / (sin(beta) cos(lambda)). Rollers on the far side unload (float)
-    well before: with a cosine sharing, at F_r / F_a = 0.5 already.
+    A roller's contacts push the screw radially, towards the roller's position angle phi_i
+    (000 eq. 8), by cos(beta) / (sin(beta) cos(lambda)) times their axial load. The radial
+    forces the rollers can balance together are the non-negative combinations of these
+    directions with the axial loads summing to F_a: a regular N-gon with its vertices at the
+    rollers. Along the load's direction psi it reaches cos(pi / N) / cos(delta), delta the
+    angle from psi to the middle of the polygon's side it crosses, so
+
+        F_r / F_a < cos(beta) / (sin(beta) cos(lambda)) * cos(pi / N) / cos(delta).
+
+    The default angles put a roller in the load's direction: the largest value over all
+    angles (cos(delta) = cos(pi / N)). Rollers on the far side unload (float) well before:
+    with a cosine sharing, at F_r / F_a = 0.5 of it already.
     """
-    return geometry.radial_projection / geometry.axial_projection
+    sector = 2.0 * math.pi / geometry.n_rollers
+    offset = np.mod(
+        np.asarray(radial_load_angle_rad, dtype=np.float64)
+        - np.asarray(carrier_angle_rad, dtype=np.float64)
+        - geometry.roller_angles_rad[0],
+        sector,
+    )
+    polygon = math.cos(sector / 2.0) / np.cos(offset - sector / 2.0)
+    return np.asarray(
+        geometry.radial_projection / geometry.axial_projection * polygon, dtype=np.float64
+    )
 
 
 def solve_load_distribution(
@@ -203,13 +224,13 @@ def solve_load_distribution(
         _as_batch(radial_load_angle_rad, "radial_load_angle_rad", minimum=-np.inf),
         _as_batch(carrier_angle_rad, "carrier_angle_rad", minimum=-np.inf),
     )
-    capacity = axial * radial_capacity_ratio(geometry)
+    capacity = axial * radial_capacity_ratio(geometry, carrier, load_angle)
     if np.any((radial >= capacity) & (radial > 0.0)):
         worst = float(np.max(radial - capacity))
         raise DomainError(
-            f"radial load exceeds the loaded-flank capacity F_a cos(beta)/(sin(beta)cos(lambda)) "
-            f"by {worst:.6g} N (a radial load without axial load, or larger than it, needs the "
-            "opposite flank, which is not modelled)"
+            f"radial load exceeds what the loaded flanks can balance at this carrier angle "
+            f"(radial_capacity_ratio) by {worst:.6g} N (a radial load without axial load, or "
+            "larger than that, needs the opposite flank, which is not modelled)"
         )
     batch_shape = axial.shape
     g_sr = _clearance(clearance_screw_roller_m, geometry, "clearance_screw_roller_m")

@@ -238,7 +238,7 @@ class TableGrid:
 
     def max_radial_ratio(self, geometry: Geometry) -> float:
         """Largest F_r / F_a of the rho axis: ratio_max_fraction of the radial capacity."""
-        return self.ratio_max_fraction * radial_capacity_ratio(geometry)
+        return self.ratio_max_fraction * float(radial_capacity_ratio(geometry))
 
 
 @dataclass(frozen=True, eq=False)

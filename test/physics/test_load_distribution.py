@@ -15,6 +15,7 @@ from prsm_health.physics.geometry import Misalignment
 from prsm_health.physics.load_distribution import (
     NEGLIGIBLE_LOAD_N,
     LoadingCase,
+    radial_capacity_ratio,
     solve_load_distribution,
 )
 from prsm_health.physics.meshing import meshing
@@ -155,6 +156,29 @@ def test_denormal_and_negligible_loads_are_zero_without_overflow() -> None:
 def test_radial_load_beyond_capacity_is_a_domain_error() -> None:
     with pytest.raises(DomainError, match="opposite flank"):
         solve_load_distribution(D000, 5_000.0, radial_load_n=20_000.0)
+
+
+def test_radial_capacity_depends_on_where_the_rollers_are() -> None:
+    """Between two rollers the balanceable radial load is the N-gon of the roller directions:
+    12 degrees off a roller (N = 10) it is cos(18 deg) / cos(6 deg) of the value with a roller
+    facing the load. Just below it the solve converges and balances the screw; just above it
+    is a DomainError (it was a ConvergenceError with the facing-roller bound)."""
+    theta = math.radians(12.0)
+    facing = float(radial_capacity_ratio(D000))
+    at_theta = float(radial_capacity_ratio(D000, theta))
+    assert at_theta / facing == pytest.approx(
+        math.cos(math.radians(18)) / math.cos(math.radians(6))
+    )
+    axial = 10_000.0
+    result = solve_load_distribution(
+        D000, axial, radial_load_n=0.9999 * at_theta * axial, carrier_angle_rad=theta
+    )
+    assert result.residual <= 1e-11
+    assert result.roller_axial_load_n.sum() == pytest.approx(axial, rel=1e-9)
+    with pytest.raises(DomainError, match="carrier angle"):
+        solve_load_distribution(
+            D000, axial, radial_load_n=1.0001 * at_theta * axial, carrier_angle_rad=theta
+        )
 
 
 def test_far_rollers_float_at_high_radial_ratio_and_equilibrium_holds() -> None:
