@@ -363,12 +363,10 @@ class JamHypotheses:
         prediction h(x_i) + H_i (x_prior - x_i), at most MAX_ITERATIONS times.
         """
         x_prior = kf.x_prior  # filterpy's copy of the predicted state (P_prior likewise)
-        x_lin = x_prior
-        mean, jacobian, variance = linearised
+        predicted, jacobian, variance = linearised
         for iteration in range(MAX_ITERATIONS + 1):
             if iteration:
                 kf.x, kf.P = x_prior.copy(), kf.P_prior.copy()
-            predicted = mean + float(jacobian @ (x_prior - x_lin))
             kf.update(
                 z,
                 HJacobian=_constant(jacobian[None, :]),
@@ -381,7 +379,7 @@ class JamHypotheses:
             _, mean, jacobian, variance = self._measurement(kf.x, block, h.count, h.fresh)
             if (float(z[0]) - mean) ** 2 <= ITERATION_SIGMAS**2 * variance:
                 return
-            x_lin = kf.x.copy()
+            predicted = mean + float(jacobian @ (x_prior - kf.x))
 
     def _measurement(
         self, x: FloatArray, block: Block, jammed: int, fresh: bool

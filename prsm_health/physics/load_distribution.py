@@ -172,8 +172,9 @@ def radial_capacity_ratio(
     (000 eq. 8), by cos(beta) / (sin(beta) cos(lambda)) times their axial load. The radial
     forces the rollers can balance together are the non-negative combinations of these
     directions with the axial loads summing to F_a: a regular N-gon with its vertices at the
-    rollers. Along the load's direction psi it reaches cos(pi / N) / cos(delta), delta the
-    angle from psi to the middle of the polygon's side it crosses, so
+    rollers (at theta + 2 pi i / N, :attr:`Geometry.roller_angles_rad`). Along the load's
+    direction psi it reaches cos(pi / N) / cos(delta), delta the angle from psi to the middle
+    of the polygon's side it crosses, so
 
         F_r / F_a < cos(beta) / (sin(beta) cos(lambda)) * cos(pi / N) / cos(delta).
 
@@ -184,8 +185,7 @@ def radial_capacity_ratio(
     sector = 2.0 * math.pi / geometry.n_rollers
     offset = np.mod(
         np.asarray(radial_load_angle_rad, dtype=np.float64)
-        - np.asarray(carrier_angle_rad, dtype=np.float64)
-        - geometry.roller_angles_rad[0],
+        - np.asarray(carrier_angle_rad, dtype=np.float64),
         sector,
     )
     polygon = math.cos(sector / 2.0) / np.cos(offset - sector / 2.0)

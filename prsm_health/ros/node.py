@@ -329,12 +329,7 @@ class HealthNode(LifecycleNode):
             config = self._config
             if config is None:
                 return
-            k_t = (
-                None
-                if config.effort_is == "current"
-                else config.estimator.actuator.drive_train.torque_constant_nm_per_a
-            )
-            sample = input_sample(msg, config.joint_name, k_t)
+            sample = input_sample(msg, config.joint_name, config.effort_torque_constant_nm_per_a)
             if sample.problem:
                 self._node_rejects[sample.problem] += 1
                 self._pending.received += 1

@@ -162,6 +162,13 @@ class NodeConfig:
     state_file: Path
     save_period_s: float
 
+    @property
+    def effort_torque_constant_nm_per_a(self) -> float | None:
+        """k_t that turns a JointState effort into the current; None if it is the current."""
+        if self.effort_is == "current":
+            return None
+        return self.estimator.actuator.drive_train.torque_constant_nm_per_a
+
 
 def default_params_file() -> Path:
     """The bundled estimator parameters: from the ament index (an installed package), else
