@@ -3,7 +3,8 @@
 The truth (``/truth/state``, :class:`~prsm_health.signals.TruthSamples`, decimated) is
 interpolated linearly to each estimate's stamp for continuous quantities (load, speed,
 precision loss: during a load ramp of 100 kN/s a 10 ms offset would be a 1 kN error); counts
-(jammed rollers) are taken from the latest truth sample at or before it. Definitions:
+(jammed rollers) are taken from the latest truth sample at or before the time compared (below).
+Definitions:
 
 - load errors: over estimates while the screw moves (|w_s| above 1 % of the preset's largest
   speed), signed load estimate minus signed truth; RMSE and max, also as % of the rated load;
@@ -13,9 +14,13 @@ precision loss: during a load ramp of 100 kN/s a 10 ms offset would be a 1 kN er
   consistency: the estimates are thinned to one per second (they are strongly correlated
   within a second), and the mean NEES of those n values must lie in the two-sided 95 %
   interval of chi^2(n) / n;
-- jams: for each increase of the true count at time t_j, the delay until the most likely
-  count first equals the new count (None if never); a false declaration is each onset of a
-  most likely count above the true one;
+- jams: an estimate stands for a block of samples around its stamp and has seen the samples
+  up to the block's end, taken as the midpoint to the next estimate's stamp (its own stamp for
+  the last one). Its count is compared with the true count at that time: a block in which a
+  roller seizes may already report it. For each increase of the true count at time t_j, the
+  delay from t_j to the end of the first block that reports the new count as the most likely
+  (None if never); a false declaration is each onset of a most likely count above the true
+  one;
 - precision loss: the final error (absolute and relative to the final truth), and the
   fraction of estimates whose truth lies within +-2 std.
 
@@ -101,7 +106,6 @@ def score(
     if not states or len(truth) == 0:
         raise ValueError("score: no estimates or no truth to compare")
     stamps, offsets = _on_truth_time(states, truth)
-    at = _truth_at(truth, stamps)
 
     def interpolated(values: FloatArray) -> FloatArray:
         return np.asarray(np.interp(stamps, truth.stamp_s, values), dtype=np.float64)
@@ -119,8 +123,9 @@ def score(
     nees_mean, interval, consistent = _nees_test(stamps[loaded], nees)
 
     estimated_count = np.array([s.jammed_rollers_most_likely for s in states])
-    true_count = truth.jammed_rollers[at]
-    jams = _jam_detections(truth, stamps, estimated_count)
+    seen_until = np.r_[(stamps[:-1] + stamps[1:]) / 2.0, stamps[-1]]
+    true_count = truth.jammed_rollers[_truth_at(truth, seen_until)]
+    jams = _jam_detections(truth, seen_until, estimated_count)
     over = estimated_count > true_count
     onsets = int(np.count_nonzero(over[1:] & ~over[:-1]) + int(over[0]))
     durations = np.diff(stamps, append=stamps[-1])
@@ -188,7 +193,7 @@ def _nees_test(stamps: FloatArray, nees: FloatArray) -> tuple[float, tuple[float
 
 
 def _jam_detections(
-    truth: TruthSamples, stamps: FloatArray, estimated: NDArray[np.int64]
+    truth: TruthSamples, seen_until: FloatArray, estimated: NDArray[np.int64]
 ) -> list[JamDetection]:
     counts = truth.jammed_rollers
     onsets = np.flatnonzero(np.diff(counts) > 0) + 1
@@ -196,7 +201,7 @@ def _jam_detections(
     for index in onsets:
         onset = float(truth.stamp_s[index])
         count = int(counts[index])
-        after = np.flatnonzero((stamps >= onset) & (estimated == count))
-        delay = float(stamps[after[0]] - onset) if after.size else None
+        after = np.flatnonzero((seen_until >= onset) & (estimated == count))
+        delay = float(seen_until[after[0]] - onset) if after.size else None
         detections.append(JamDetection(onset_s=onset, count=count, delay_s=delay))
     return detections
