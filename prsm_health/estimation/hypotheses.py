@@ -6,12 +6,14 @@ probability p = 1 - exp(-rate dt) per block, dt its duration but at most
 ``LONGEST_PREDICTION_S``. One step per block:
 
 1. merging (the IMM mixing of Blom and Bar-Shalom, filterpy's ``IMMEstimator``): for each
-   count k, the established hypothesis k (probability times 1 - p: no new jam) and the
-   *fresh* hypothesis k of the previous block (a jam that started then, and has been tested
-   by that block's likelihood) become one Gaussian by moment matching; then from every
-   established k a fresh hypothesis k + 1 is born: the state of k (the load does not change
-   when a roller seizes) plus the covariance of a new ripple of unknown phase
-   (ripple_prior_std^2 on c and s), with probability times p;
+   count k, the established hypotheses k (probability times 1 - p: no new jam) and the
+   *fresh* hypotheses k of the previous block (a jam that started then, and has been tested
+   by that block's likelihood) become Gaussians by moment matching: one for those whose
+   loads agree within ``filter.merge_distance_sigmas``, at most
+   ``filter.components_per_count`` per count (see below); then from every established k a
+   fresh hypothesis k + 1 is born: the state of k (the load does not change when a roller
+   seizes) plus the covariance of a new ripple of unknown phase (ripple_prior_std^2 on c and
+   s), with probability times p;
 2. each filter predicts over dt and updates (filterpy ``ExtendedKalmanFilter`` or
    ``UnscentedKalmanFilter``; Joseph-form covariance update in the EKF). A fresh hypothesis
    predicts the block in which its jam starts at a uniformly random instant
@@ -25,6 +27,14 @@ k + 1 itself while k + 1 is still improbable. When a jam happened unseen (at sta
 load of count k is biased by the jam's torque and would keep pulling k + 1 off, so that k + 1
 could never gather the ripple's evidence. Tested by one block's likelihood first, a fresh
 hypothesis that did not happen carries almost no weight into the merge.
+
+Why a count may hold two Gaussians: "k + 1 jammed since the last standstill" (born there, its
+load right) and "k + 1 jammed from this block on" (born from k, with k's load, which is biased
+by the unseen jam's torque) are both count k + 1 but lie tens of standard deviations apart.
+Moment-matched into one, the newborn (with the prior of a jam per block, about e^-18) pulled
+the older one towards k's load as soon as the older one's probability fell below it, which the
+ripple's extra variance makes happen while a stroke starts: the hypothesis that was right was
+averaged away before the ripple could show it.
 
 What filterpy's ``IMMEstimator`` does not do and this does: the fresh hypotheses above,
 pruning (a count below ``filter.min_hypothesis_probability`` is dropped: jams never
@@ -264,25 +274,9 @@ class JamHypotheses:
         for count in sorted(by_count):
             stay = log_stay if count < self.n_rollers else 0.0
             members = by_count[count]
-            logs = np.array([h.log_prob + stay for h in members])
-            total = float(np.logaddexp.reduce(logs))
-            if len(members) == 1 or not math.isfinite(total):
-                kept = max(members, key=lambda h: h.log_prob)
-                kept.log_prob, kept.fresh = total, False
-                established.append(kept)
-                self._spare_filters += [h.filter for h in members if h is not kept]
-                continue
-            weights = np.exp(logs - total)
-            x0 = sum(w * h.filter.x for w, h in zip(weights, members, strict=True))
-            p0 = np.zeros((self._dim, self._dim))
-            for w, h in zip(weights, members, strict=True):
-                d = h.filter.x - x0
-                p0 += w * (h.filter.P + np.outer(d, d))
-            kept = members[0]
-            kept.filter.x, kept.filter.P = np.asarray(x0, dtype=np.float64), p0
-            kept.log_prob, kept.fresh = total, False
-            established.append(kept)
-            self._spare_filters += [h.filter for h in members[1:]]
+            for h in members:
+                h.log_prob += stay
+            established += [self._moment_match(group) for group in self._groups(members)]
         fresh = [
             Hypothesis(
                 h.count + 1,
@@ -294,6 +288,43 @@ class JamHypotheses:
             if h.count < self.n_rollers and math.isfinite(h.log_prob)
         ]
         self.hypotheses = established + fresh
+
+    def _groups(self, members: list[Hypothesis]) -> list[list[Hypothesis]]:
+        """Members of one count in at most ``filter.components_per_count`` groups: each, most
+        probable first, joins the group whose most probable member's load is nearest to its
+        own if that is within ``filter.merge_distance_sigmas`` or there is no room for
+        another group, else starts one."""
+        limit = self._params.filter.components_per_count
+        near = self._params.filter.merge_distance_sigmas**2
+        groups: list[list[Hypothesis]] = []
+        for h in sorted(members, key=lambda h: -h.log_prob):
+            distances = [_load_distance2(group[0], h) for group in groups]
+            nearest = int(np.argmin(distances)) if groups else -1
+            if groups and (distances[nearest] <= near or len(groups) >= limit):
+                groups[nearest].append(h)
+            else:
+                groups.append([h])
+        return groups
+
+    def _moment_match(self, members: list[Hypothesis]) -> Hypothesis:
+        """One Gaussian with the members' total probability and their mean and covariance
+        (the first member's filter carries it; the others' filters become spares)."""
+        logs = np.array([h.log_prob for h in members])
+        total = float(np.logaddexp.reduce(logs))
+        if len(members) == 1 or not math.isfinite(total):
+            kept = max(members, key=lambda h: h.log_prob)
+        else:
+            weights = np.exp(logs - total)
+            x0 = sum(w * h.filter.x for w, h in zip(weights, members, strict=True))
+            p0 = np.zeros((self._dim, self._dim))
+            for w, h in zip(weights, members, strict=True):
+                d = h.filter.x - x0
+                p0 += w * (h.filter.P + np.outer(d, d))
+            kept = members[0]
+            kept.filter.x, kept.filter.P = np.asarray(x0, dtype=np.float64), p0
+        kept.log_prob, kept.fresh = total, False
+        self._spare_filters += [h.filter for h in members if h is not kept]
+        return kept
 
     def step(self, block: Block, *, jerk_psd: float, evidence: bool = True) -> StepResult:
         """Merge, predict, update and reweight for one block (see the module docstring).
@@ -466,6 +497,12 @@ class JamHypotheses:
     def most_likely(self) -> Hypothesis:
         """The hypothesis with the largest probability."""
         return max(self.hypotheses, key=lambda h: h.log_prob)
+
+
+def _load_distance2(a: Hypothesis, b: Hypothesis) -> float:
+    """Squared difference of two hypotheses' loads over the sum of their load variances."""
+    difference = float(a.filter.x[LOAD] - b.filter.x[LOAD])
+    return difference**2 / float(a.filter.P[LOAD, LOAD] + b.filter.P[LOAD, LOAD])
 
 
 def _constant(value: FloatArray) -> Any:

@@ -144,6 +144,9 @@ class FilterParams:
     outlier. divergence_nis: mean NIS over divergence_window_s above it means the filter is
     inconsistent; the load is re-initialised (event DIVERGENCE_RECOVERED).
     min_hypothesis_probability: below it a jam hypothesis is pruned (when pruning is on).
+    components_per_count: most Gaussians kept per jam count; merge_distance_sigmas: two of one
+    count whose loads differ by less than this many standard deviations become one
+    (hypotheses.py: a jam that happened unseen and one that starts now are different).
     max_speed_rad_s: motor speeds beyond it are out of range (rejected). Default 0 means
     three times the preset's largest speed.
     """
@@ -156,6 +159,8 @@ class FilterParams:
     divergence_nis: float = 12.0
     divergence_window_s: float = 2.0
     min_hypothesis_probability: float = 1e-9
+    components_per_count: int = 2
+    merge_distance_sigmas: float = 3.0
     max_speed_rad_s: float = 0.0
 
     def __post_init__(self) -> None:
@@ -171,8 +176,16 @@ class FilterParams:
                 "divergence_nis": (1.0, 1e6),
                 "divergence_window_s": (1e-3, 1e4),
                 "min_hypothesis_probability": (0.0, 0.1),
+                "merge_distance_sigmas": (0.0, 1e3),
                 "max_speed_rad_s": (0.0, 1e5),
             },
+        )
+        require(
+            isinstance(self.components_per_count, int)
+            and not isinstance(self.components_per_count, bool)
+            and 1 <= self.components_per_count <= 8,
+            "filter.components_per_count",
+            f"must be an integer in [1, 8], got {self.components_per_count!r}",
         )
 
 

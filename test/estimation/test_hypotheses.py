@@ -18,7 +18,7 @@ from prsm_health.estimation.hypotheses import (
     safe_sqrt,
 )
 from prsm_health.estimation.inputs import Block
-from prsm_health.estimation.measurement import TorqueModel
+from prsm_health.estimation.measurement import LOAD, TorqueModel
 from prsm_health.estimation.params import EstimatorParams, Fidelity, ModelParams
 from prsm_health.physics.presets import load_preset
 
@@ -43,6 +43,8 @@ def test_merging_equals_filterpy_imm_state_estimate_and_fresh_jams_are_born() ->
     members = []
     for fresh in (False, True):
         x = rng.normal(0.0, 1e3, dim)
+        if fresh:  # loads within merge_distance_sigmas: one Gaussian
+            x[LOAD] = members[0].filter.x[LOAD] + 1.0
         a = rng.normal(0.0, 1.0, (dim, dim))
         kf = KalmanFilter(dim_x=dim, dim_z=1)
         kf.x, kf.P = x, a @ a.T + np.eye(dim)
@@ -65,6 +67,47 @@ def test_merging_equals_filterpy_imm_state_estimate_and_fresh_jams_are_born() ->
     assert sorted(born) == [1, 3]
     np.testing.assert_array_equal(born[3].filter.x, merged[0].filter.x)
     assert math.exp(born[1].log_prob) == pytest.approx(0.6 * p_jump, rel=1e-12)
+
+
+def test_a_count_keeps_apart_what_lies_far_apart() -> None:
+    """Hypotheses of one count whose loads differ by more than merge_distance_sigmas stay
+    separate Gaussians, at most components_per_count of them; what would exceed that joins
+    the nearest; with one component per count everything is moment-matched into one."""
+    loads_n = {"a": 40e3, "near_a": 40.5e3, "b": 52e3, "beyond_b": 70e3}
+    log_probs = {"a": math.log(0.5), "near_a": math.log(0.1), "b": math.log(0.3)}
+    log_probs["beyond_b"] = math.log(0.1)
+
+    def merged(components: int, names: list[str]) -> list[Hypothesis]:
+        p = dataclasses.replace(
+            params(prune_hypotheses=False),
+            filter=dataclasses.replace(params().filter, components_per_count=components),
+        )
+        bank = JamHypotheses(p, TorqueModel(p))
+        dim = bank.hypotheses[0].filter.dim_x
+        bank.hypotheses = []
+        for name in names:
+            x = np.zeros(dim)
+            x[LOAD] = loads_n[name]
+            covariance = np.eye(dim) * 1e4
+            covariance[LOAD, LOAD] = 500.0**2
+            bank.hypotheses.append(
+                Hypothesis(1, bank._new_filter(x, covariance), log_probs[name], name != "a")
+            )
+        bank._merge(0.0)
+        return sorted((h for h in bank.hypotheses if not h.fresh), key=lambda h: h.filter.x[LOAD])
+
+    def expected_load(names: list[str]) -> float:
+        weights = np.exp([log_probs[n] for n in names])
+        return float(np.dot(weights, [loads_n[n] for n in names]) / weights.sum())
+
+    a, b = merged(2, ["a", "near_a", "b"])
+    assert a.filter.x[LOAD] == pytest.approx(expected_load(["a", "near_a"]), rel=1e-12)
+    assert b.filter.x[LOAD] == loads_n["b"]
+    assert math.exp(a.log_prob) == pytest.approx(0.6) and math.exp(b.log_prob) == pytest.approx(0.3)
+    a, b = merged(2, ["a", "near_a", "b", "beyond_b"])
+    assert b.filter.x[LOAD] == pytest.approx(expected_load(["b", "beyond_b"]), rel=1e-12)
+    (single,) = merged(1, ["a", "near_a", "b"])
+    assert single.filter.x[LOAD] == pytest.approx(expected_load(["a", "near_a", "b"]), rel=1e-12)
 
 
 def moving_block(torque_nm: float, rng: np.random.Generator) -> Block:

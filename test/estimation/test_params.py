@@ -58,6 +58,14 @@ def test_no_radial_load_and_aligned_drops_the_ripple_states() -> None:
             "model.initial_jammed_rollers",
         ),
         (
+            {"actuator": {"preset": "dong2022-downhole"}, "filter": {"components_per_count": 1.5}},
+            "filter.components_per_count",
+        ),
+        (
+            {"actuator": {"preset": "dong2022-downhole"}, "filter": {"components_per_count": 0}},
+            "filter.components_per_count",
+        ),
+        (
             {
                 "actuator": {"preset": "dong2022-downhole"},
                 "diagnostics": {"load_warn_fraction": 2.0, "load_error_fraction": 1.0},
