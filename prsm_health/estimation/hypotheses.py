@@ -181,9 +181,9 @@ class JamHypotheses:
         if self._ripple:
             self._jump_cov[RIPPLE_COS:, RIPPLE_COS:] = np.eye(2) * params.model.ripple_prior_std**2
         self._spare_filters: list[Filter] = []
-        self._load_process_cache: tuple[object, tuple[FloatArray, FloatArray]] = (
+        self._process_cache: tuple[object, tuple[FloatArray, FloatArray, FloatArray]] = (
             None,
-            (initial, initial),
+            (initial, initial, initial),
         )
         start = params.model.initial_jammed_rollers
         counts = [start] if self._prune else list(range(self.n_rollers + 1))
@@ -216,41 +216,33 @@ class JamHypotheses:
         kf.P = p.copy()
         return kf
 
-    def _process(
-        self, jammed: int, dt: float, x: FloatArray, jerk_psd: float
-    ) -> tuple[FloatArray, FloatArray]:
-        """Transition and process noise over dt from state x: the load as a white-jerk
-        (constant acceleration) process; the ripple (only when jammed) as a random walk,
-        widened by its prior size times the relative change of its load scale
-        (:meth:`TorqueModel.ripple_drift`)."""
-        transition, load_noise = self._load_process(dt, jerk_psd)
-        noise = load_noise
-        if self._ripple and jammed:
-            walk = self._params.model.ripple_random_walk_per_sqrt_s
-            drift = self._model.ripple_drift(x, dt) * self._params.model.ripple_prior_std
-            noise = load_noise.copy()
-            noise[RIPPLE_COS, RIPPLE_COS] = noise[RIPPLE_SIN, RIPPLE_SIN] = walk**2 * dt + drift**2
-        return transition, noise
-
-    def _load_process(self, dt: float, jerk_psd: float) -> tuple[FloatArray, FloatArray]:
-        """The load part of :meth:`_process` (cached: consecutive blocks share dt and psd)."""
+    def _process(self, jammed: int, dt: float, jerk_psd: float) -> tuple[FloatArray, FloatArray]:
+        """Transition and process noise over dt: the load as a white-jerk (constant
+        acceleration) process; the ripple, only when jammed, as a random walk (cached:
+        consecutive blocks share dt and psd)."""
         key = (dt, jerk_psd)
-        if self._load_process_cache[0] != key:
+        if self._process_cache[0] != key:
             transition = np.eye(self._dim)
             transition[LOAD, LOAD_RATE] = transition[LOAD_RATE, LOAD_ACCELERATION] = dt
             transition[LOAD, LOAD_ACCELERATION] = dt**2 / 2.0
-            noise = np.zeros((self._dim, self._dim))
-            noise[:LOAD_STATES, :LOAD_STATES] = jerk_psd * np.array(
+            healthy = np.zeros((self._dim, self._dim))
+            healthy[:LOAD_STATES, :LOAD_STATES] = jerk_psd * np.array(
                 [
                     [dt**5 / 20.0, dt**4 / 8.0, dt**3 / 6.0],
                     [dt**4 / 8.0, dt**3 / 3.0, dt**2 / 2.0],
                     [dt**3 / 6.0, dt**2 / 2.0, dt],
                 ]
             )
-            transition.setflags(write=False)
-            noise.setflags(write=False)
-            self._load_process_cache = (key, (transition, noise))
-        return self._load_process_cache[1]
+            jammed_noise = healthy.copy()
+            if self._ripple:
+                walk = self._params.model.ripple_random_walk_per_sqrt_s
+                jammed_noise[RIPPLE_COS, RIPPLE_COS] = walk**2 * dt
+                jammed_noise[RIPPLE_SIN, RIPPLE_SIN] = walk**2 * dt
+            for matrix in (transition, healthy, jammed_noise):
+                matrix.setflags(write=False)
+            self._process_cache = (key, (transition, healthy, jammed_noise))
+        transition, healthy, jammed_noise = self._process_cache[1]
+        return transition, jammed_noise if jammed else healthy
 
     # --- the step -----------------------------------------------------------------------
     def probabilities(self) -> FloatArray:
@@ -341,7 +333,7 @@ class JamHypotheses:
         z = np.array([block.motor_torque_nm])
         for h in self.hypotheses:
             kf = h.filter
-            transition, noise = self._process(h.count, dt, kf.x, jerk_psd)
+            transition, noise = self._process(h.count, dt, jerk_psd)
             if isinstance(kf, UnscentedKalmanFilter):
                 kf.Q = noise
                 kf.predict(dt=dt, fx=_transition_apply, transition=transition)

@@ -119,16 +119,6 @@ class TorqueModel:
             math.copysign(self._load_arm_m, load_n) / root**3,
         )
 
-    def ripple_drift(self, x: FloatArray, dt: float) -> float:
-        """Relative change of S over dt at the state's load rate, |dS/S|, at most 1.
-
-        The physical ripple follows the radial load, not S; while the load ramps, S changes
-        and the relative ripple c, s must change the other way (hypotheses.py widens them).
-        """
-        scale, slope = self.ripple_scale(float(x[LOAD]))
-        change = abs(slope * float(x[LOAD_RATE]) * dt)
-        return min(1.0, change / scale) if scale > 0.0 else 1.0
-
     def predict(self, x: FloatArray, block: Block, jammed: int) -> Prediction:
         """The measurement of ``block`` under ``jammed`` rollers at state ``x``."""
         load = float(x[LOAD])
