@@ -35,7 +35,7 @@ def add_bench_command(commands: Any) -> None:
         "--scenes",
         nargs="+",
         metavar="NAME",
-        help="scenes or groups (bags, long, two-jam, wear-prior) to run; default all",
+        help="scenes or groups (bags, long, two-jam, one-jam, wear-prior) to run; default all",
     )
     parser.add_argument(
         "--configs",

@@ -11,7 +11,8 @@ the simulator's truth with :func:`~prsm_health.estimation.metrics.score`:
   nominal downhole cycle, one hour of it (default configuration only: the false-jam floor),
   random two-jam runs whose jam onsets are put in categories from the truth (steady motion,
   stroke end/low load, standstill: docs/estimation.md says they differ in identifiability),
-  and short accelerated-wear runs with the wear coefficient drawn from its prior;
+  five-minute runs with one jam (default configuration only: false second jams), and short
+  accelerated-wear runs with the wear coefficient drawn from its prior;
 - the naive configuration (about 30 ms per sample on this machine) only on an excerpt, the
   first ``naive_seconds`` of a few bags, where every configuration runs as well for a
   consistent comparison.
@@ -74,10 +75,11 @@ BAG_SCENES = (
 #: Bags whose first ``naive_seconds`` every configuration runs on, the naive one included.
 NAIVE_SCENES = ("nominal-downhole", "sudden-jam", "radial-misalignment")
 #: Scene groups (``--scenes`` takes a scene name or one of these).
-GROUPS = ("bags", "long", "two-jam", "wear-prior")
+GROUPS = ("bags", "long", "two-jam", "one-jam", "wear-prior")
 #: Seeds of the generated runs (fixed: the same plan gives the same scenes).
 LONG_SEEDS = {"nominal-10min": 101, "nominal-1h": 102}
 TWO_JAM_SEED = 2026
+ONE_JAM_SEED = 500
 WEAR_PRIOR_SEED = 300
 #: A two-jam run's jams start at least this long before its end (one cycle is 18-25 s).
 JAM_MARGIN_S = 25.0
@@ -186,6 +188,27 @@ def two_jam_scenes(count: int, *, seed: int = TWO_JAM_SEED) -> list[Scene]:
     return scenes
 
 
+def one_jam_scenes(count: int, duration_s: float, *, seed: int = ONE_JAM_SEED) -> list[Scene]:
+    """``count`` nominal downhole runs of ``duration_s`` with one jam at a random time in
+    their first minute. After it, k and k + 1 jammed rollers explain the motor torque alike
+    (docs/estimation.md): these runs measure false second jams over minutes of cycles."""
+    rng = np.random.default_rng(seed)
+    scenes = []
+    for i in range(count):
+        time_s = round(float(rng.uniform(5.0, 60.0)), 3)
+        jam = {"time_s": time_s, "roller": int(rng.integers(1, 11))}
+        scenes.append(
+            _generated(
+                f"one-jam-{i + 1}",
+                "nominal-downhole",
+                duration_s=duration_s,
+                seed=seed + i,
+                jams=[jam],
+            )
+        )
+    return scenes
+
+
 def wear_prior_scenes(count: int, duration_s: float, *, seed: int = WEAR_PRIOR_SEED) -> list[Scene]:
     """Accelerated-wear runs with the wear coefficient drawn from the prior (sigma_ln 0.5)."""
     return [
@@ -258,9 +281,12 @@ def full_plan(bags: Path = DEFAULT_BAGS) -> Plan:
         ),
     ]
     two_jam = [BenchScene(s.name, "two-jam", s) for s in two_jam_scenes(8)]
+    one_jam = [
+        BenchScene(s.name, "one-jam", s, configs=("default",)) for s in one_jam_scenes(8, 300.0)
+    ]
     return Plan(
         mode="full",
-        scenes=(*_bag_scenes(bags, BAG_SCENES), *long, *two_jam),
+        scenes=(*_bag_scenes(bags, BAG_SCENES), *long, *two_jam, *one_jam),
         configs=CONFIGURATIONS,
         timing_samples=20_000,
         naive_scenes=NAIVE_SCENES,

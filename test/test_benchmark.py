@@ -22,6 +22,7 @@ from prsm_health.benchmark import (
     BenchScene,
     Plan,
     cycle_period_s,
+    one_jam_scenes,
     onset_category,
     quick_plan,
     run_benchmark,
@@ -195,6 +196,31 @@ def test_two_jam_runs_are_reproducible_and_leave_a_cycle_after_each_jam() -> Non
         assert second.time_s - first.time_s >= 2.0
         assert second.time_s <= scene.duration_s - 25.0
         assert first.roller != second.roller
+
+
+def test_one_jam_runs_are_reproducible_with_one_jam_in_their_first_minute() -> None:
+    scenes = one_jam_scenes(4, 300.0)
+    assert [s.jams for s in scenes] == [s.jams for s in one_jam_scenes(4, 300.0)]
+    assert len({s.seed for s in scenes}) == 4
+    for scene in scenes:
+        (jam,) = scene.jams
+        assert scene.duration_s == 300.0 and 5.0 <= jam.time_s <= 60.0
+
+
+def test_false_jams_are_summed_over_the_runs_of_the_floor(results: BenchResults) -> None:
+    """The one-jam floor adds up the runs' false declarations; one false run fails it."""
+    default = [r for r in results.runs_of(config="default") if r.group == "two-jam"]
+    runs = [dataclasses.replace(r, group="one-jam") for r in default]
+    clean = dataclasses.replace(results, runs=runs)
+    name = "no false second jam after a jam (beyond the issue)"
+    assert next(f for f in floors(clean) if f.name == name).passed == all(
+        r.metrics.false_jam_declarations == 0 for r in runs
+    )
+    false = dataclasses.replace(
+        runs[0], metrics=dataclasses.replace(runs[0].metrics, false_jam_declarations=2)
+    )
+    failed = next(f for f in floors(dataclasses.replace(clean, runs=[false])) if f.name == name)
+    assert failed.passed is False and failed.measured.startswith("2 (")
 
 
 def test_cycle_period_of_sudden_jam_is_its_documented_cycle() -> None:
