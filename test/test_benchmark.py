@@ -11,6 +11,7 @@ from __future__ import annotations
 import dataclasses
 import json
 import math
+import re
 from pathlib import Path
 
 import numpy as np
@@ -123,6 +124,11 @@ def test_files_hold_the_measured_numbers(results: BenchResults, tmp_path: Path) 
     for floor in found:
         assert floor.name in text
     assert "tiny-bag" in text and "radial-off" in text
+    (row,) = [
+        line for line in text.splitlines() if line.startswith("| precision loss with the true")
+    ]
+    cells = re.split(r"(?<!\\)\|", row)[1:-1]  # cells between unescaped pipes
+    assert len(cells) == 4  # the requirement's |final error| stays in its cell
 
 
 def test_floors_follow_their_thresholds(results: BenchResults) -> None:
