@@ -37,9 +37,10 @@ ripple's extra variance makes happen while a stroke starts: the hypothesis that 
 averaged away before the ripple could show it.
 
 What filterpy's ``IMMEstimator`` does not do and this does: the fresh hypotheses above,
-pruning (a count below ``filter.min_hypothesis_probability`` is dropped: jams never
-decrease, so it cannot come back), gating (a block that no hypothesis explains is not used),
-and numerical repair of the covariances (symmetrised, variance floors, positive definite).
+pruning (a Gaussian below ``filter.min_hypothesis_probability`` is dropped: jams never
+decrease, so a count that falls below it cannot come back), gating (a block that no
+hypothesis explains is not used), and numerical repair of the covariances (symmetrised,
+variance floors, positive definite).
 """
 
 from __future__ import annotations
