@@ -627,6 +627,31 @@ def markdown(results: BenchResults, found: list[Floor]) -> str:
 
 
 # --- pareto.png -------------------------------------------------------------------------------
+#: Points of the Pareto plot closer than this on both log axes share one label [decades].
+LABEL_GROUP_DECADES = 0.08
+
+
+def label_groups(
+    points: list[tuple[float, float, str]],
+) -> list[list[tuple[float, float, str]]]:
+    """The points (x, y, name) in groups that share one label: each joins the first group
+    whose first point is within LABEL_GROUP_DECADES of it on both log axes (points that
+    nearly coincide would otherwise print their names over each other)."""
+    groups: list[list[tuple[float, float, str]]] = []
+    for point in points:
+        for group in groups:
+            x, y, _ = group[0]
+            if (
+                abs(math.log10(point[0] / x)) <= LABEL_GROUP_DECADES
+                and abs(math.log10(point[1] / y)) <= LABEL_GROUP_DECADES
+            ):
+                group.append(point)
+                break
+        else:
+            groups.append([point])
+    return groups
+
+
 def pareto(results: BenchResults, path: Path) -> None:
     """Mean cost per sample (log x) against load RMSE, one point per configuration: on the
     full runs, and on the naive excerpt (where every configuration ran)."""
@@ -654,9 +679,11 @@ def pareto(results: BenchResults, path: Path) -> None:
         axis.set_xscale("log")
         axis.set_yscale("log")
         axis.scatter([p[0] for p in points], [p[1] for p in points])
-        for i, (x, y, name) in enumerate(points):  # alternate label sides: near points differ
-            offset = (5, 4) if i % 2 == 0 else (5, -10)
-            axis.annotate(name, (x, y), textcoords="offset points", xytext=offset, fontsize=7)
+        for i, group in enumerate(label_groups(points)):  # alternate sides between groups
+            x, y, _ = group[0]
+            label = "\n".join(name for _, _, name in group)
+            offset = (5, 4) if i % 2 == 0 else (5, -4 - 8 * len(group))
+            axis.annotate(label, (x, y), textcoords="offset points", xytext=offset, fontsize=7)
         for scale, values in (
             (axis.xaxis, [p[0] for p in points]),
             (axis.yaxis, [p[1] for p in points]),

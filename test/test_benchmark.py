@@ -35,6 +35,7 @@ from prsm_health.benchmark_report import (
     FILES,
     RMSE_PERCENT,
     floors,
+    label_groups,
     pooled_rmse_percent,
     write_results,
 )
@@ -255,3 +256,10 @@ def test_selection_by_name_and_group_and_unknown_names() -> None:
 def test_cli_refuses_unknown_configurations(capsys: pytest.CaptureFixture[str]) -> None:
     assert main(["bench", "--quick", "--configs", "fast"]) == 2
     assert "unknown fast" in capsys.readouterr().err
+
+
+def test_nearly_coinciding_pareto_points_share_a_label() -> None:
+    points = [(33.7, 4.77, "default"), (33.5, 4.77, "no-skip-standstill"), (38.6, 4.75, "no-merge")]
+    points += [(64.6, 4.76, "no-prune"), (44.8, 13.2, "ukf")]
+    names = [[name for _, _, name in group] for group in label_groups(points)]
+    assert names == [["default", "no-skip-standstill", "no-merge"], ["no-prune"], ["ukf"]]
