@@ -292,7 +292,7 @@ class JamHypotheses:
         groups: list[list[Hypothesis]] = []
         for h in sorted(members, key=lambda h: -h.log_prob):
             distances = [_load_distance2(group[0], h) for group in groups]
-            nearest = int(np.argmin(distances)) if groups else -1
+            nearest = min(range(len(groups)), key=distances.__getitem__) if groups else -1
             if groups and (distances[nearest] <= near or len(groups) >= limit):
                 groups[nearest].append(h)
             else:
@@ -300,23 +300,24 @@ class JamHypotheses:
         return groups
 
     def _moment_match(self, members: list[Hypothesis]) -> Hypothesis:
-        """One Gaussian with the members' total probability and their mean and covariance
-        (the first member's filter carries it; the others' filters become spares)."""
-        logs = np.array([h.log_prob for h in members])
-        total = float(np.logaddexp.reduce(logs))
-        if len(members) == 1 or not math.isfinite(total):
-            kept = max(members, key=lambda h: h.log_prob)
-        else:
-            weights = np.exp(logs - total)
-            x0 = sum(w * h.filter.x for w, h in zip(weights, members, strict=True))
-            p0 = np.zeros((self._dim, self._dim))
-            for w, h in zip(weights, members, strict=True):
-                d = h.filter.x - x0
-                p0 += w * (h.filter.P + np.outer(d, d))
-            kept = members[0]
-            kept.filter.x, kept.filter.P = np.asarray(x0, dtype=np.float64), p0
+        """One Gaussian with the members' total probability and their mean and covariance,
+        carried by the first member's filter (the most probable: :meth:`_groups` sorts them);
+        the others' filters become spares."""
+        kept = members[0]
+        total = kept.log_prob
+        if len(members) > 1:
+            logs = np.array([h.log_prob for h in members])
+            total = float(np.logaddexp.reduce(logs))
+            if math.isfinite(total):
+                weights = np.exp(logs - total)
+                x0 = sum(w * h.filter.x for w, h in zip(weights, members, strict=True))
+                p0 = np.zeros((self._dim, self._dim))
+                for w, h in zip(weights, members, strict=True):
+                    d = h.filter.x - x0
+                    p0 += w * (h.filter.P + np.outer(d, d))
+                kept.filter.x, kept.filter.P = np.asarray(x0, dtype=np.float64), p0
+            self._spare_filters += [h.filter for h in members[1:]]
         kept.log_prob, kept.fresh = total, False
-        self._spare_filters += [h.filter for h in members if h is not kept]
         return kept
 
     def step(self, block: Block, *, jerk_psd: float, evidence: bool = True) -> StepResult:
