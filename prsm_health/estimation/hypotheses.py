@@ -291,12 +291,12 @@ class JamHypotheses:
         near = self._params.filter.merge_distance_sigmas**2
         groups: list[list[Hypothesis]] = []
         for h in sorted(members, key=lambda h: -h.log_prob):
-            distances = [_load_distance2(group[0], h) for group in groups]
-            nearest = min(range(len(groups)), key=distances.__getitem__) if groups else -1
-            if groups and (distances[nearest] <= near or len(groups) >= limit):
-                groups[nearest].append(h)
-            else:
-                groups.append([h])
+            if groups:
+                distance, nearest = min((_load_distance2(g[0], h), i) for i, g in enumerate(groups))
+                if distance <= near or len(groups) >= limit:
+                    groups[nearest].append(h)
+                    continue
+            groups.append([h])
         return groups
 
     def _moment_match(self, members: list[Hypothesis]) -> Hypothesis:
