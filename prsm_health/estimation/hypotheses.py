@@ -36,11 +36,21 @@ the older one towards k's load as soon as the older one's probability fell below
 ripple's extra variance makes happen while a stroke starts: the hypothesis that was right was
 averaged away before the ripple could show it.
 
+Why pruning has two floors: a fresh hypothesis below ``filter.min_hypothesis_probability``
+(1e-9) is dropped, an established one only below ``filter.min_established_probability``
+(1e-11). Dropping a fresh one loses nothing: the same jam is born again at the next block with
+the same prior. An established one carries its history: after a jam at standstill, "k + 1
+since the standstill" has the load that is right, and while the next stroke starts it loses a
+few nats to k, whose load can follow the new ripple; dropped there, it can only come back as a
+newborn with k's load, which is biased by the jam. The established floor alone (both at 1e-12)
+keeps every fresh one that lost fewer than ten nats and with it a second Gaussian per count
+most of the time, 30-45 % more time per sample; with the fresh floor where it was, the same
+jams are found sooner at a few per cent (docs/estimation.md, pruning).
+
 What filterpy's ``IMMEstimator`` does not do and this does: the fresh hypotheses above,
-pruning (a Gaussian below ``filter.min_hypothesis_probability`` is dropped: jams never
-decrease, so a count that falls below it cannot come back), gating (a block that no
-hypothesis explains is not used), and numerical repair of the covariances (symmetrised,
-variance floors, positive definite).
+pruning (jams never decrease, so a count that falls below its floor cannot come back except
+by a new birth), gating (a block that no hypothesis explains is not used), and numerical
+repair of the covariances (symmetrised, variance floors, positive definite).
 """
 
 from __future__ import annotations
@@ -458,10 +468,18 @@ class JamHypotheses:
             h.log_prob -= total
 
     def _drop_unlikely(self) -> None:
-        """Prune hypotheses below the probability floor (never the most likely one)."""
-        floor = math.log(max(self._params.filter.min_hypothesis_probability, 1e-300))
+        """Prune hypotheses below their probability floor (never the most likely one): a
+        fresh one below ``filter.min_hypothesis_probability``, an established one below
+        ``filter.min_established_probability`` (see the module docstring)."""
+        settings = self._params.filter
+        fresh_floor = math.log(max(settings.min_hypothesis_probability, 1e-300))
+        established_floor = math.log(max(settings.min_established_probability, 1e-300))
         best = max(self.hypotheses, key=lambda h: h.log_prob)
-        kept = [h for h in self.hypotheses if h.log_prob >= floor or h is best]
+        kept = [
+            h
+            for h in self.hypotheses
+            if h is best or h.log_prob >= (fresh_floor if h.fresh else established_floor)
+        ]
         self._spare_filters += [h.filter for h in self.hypotheses if h not in kept]
         self.hypotheses = kept
         self._normalise()

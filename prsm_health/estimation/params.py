@@ -143,7 +143,9 @@ class FilterParams:
     normalised innovation squared exceeds it in every active hypothesis is rejected as an
     outlier. divergence_nis: mean NIS over divergence_window_s above it means the filter is
     inconsistent; the load is re-initialised (event DIVERGENCE_RECOVERED).
-    min_hypothesis_probability: below it a jam hypothesis is pruned (when pruning is on).
+    min_hypothesis_probability: below it a fresh jam hypothesis (a jam in the last block,
+    weighed by that block) is pruned; min_established_probability: below it an established
+    one is (when pruning is on; hypotheses.py says why the two differ).
     components_per_count: most Gaussians kept per jam count; merge_distance_sigmas: two of one
     count whose loads differ by less than this many standard deviations become one
     (hypotheses.py: a jam that happened unseen and one that starts now are different).
@@ -159,6 +161,7 @@ class FilterParams:
     divergence_nis: float = 12.0
     divergence_window_s: float = 2.0
     min_hypothesis_probability: float = 1e-9
+    min_established_probability: float = 1e-11
     components_per_count: int = 2
     merge_distance_sigmas: float = 3.0
     max_speed_rad_s: float = 0.0
@@ -176,6 +179,7 @@ class FilterParams:
                 "divergence_nis": (1.0, 1e6),
                 "divergence_window_s": (1e-3, 1e4),
                 "min_hypothesis_probability": (0.0, 0.1),
+                "min_established_probability": (0.0, 0.1),
                 "merge_distance_sigmas": (0.0, 1e3),
                 "max_speed_rad_s": (0.0, 1e5),
             },

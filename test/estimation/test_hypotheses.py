@@ -168,6 +168,33 @@ def test_pruning_keeps_the_likely_counts_and_the_next_one() -> None:
     assert [h.fresh for h in bank.hypotheses] == [False, True]
 
 
+def test_an_established_hypothesis_is_pruned_at_a_lower_floor_than_a_fresh_one() -> None:
+    """Between the two floors an established hypothesis stays and a fresh one goes; below
+    the established floor both go; the most likely one always stays."""
+    p = params(prune_hypotheses=True)
+    settings = p.filter
+    assert settings.min_established_probability < settings.min_hypothesis_probability
+    bank = JamHypotheses(p, TorqueModel(p))
+    dim = bank.hypotheses[0].filter.dim_x
+    between = math.log(
+        math.sqrt(settings.min_established_probability * settings.min_hypothesis_probability)
+    )
+    below = math.log(settings.min_established_probability) - 1.0
+
+    def hypothesis(count: int, log_prob: float, fresh: bool) -> Hypothesis:
+        return Hypothesis(count, bank._new_filter(np.zeros(dim), np.eye(dim)), log_prob, fresh)
+
+    bank.hypotheses = [
+        hypothesis(0, 0.0, False),
+        hypothesis(1, between, False),
+        hypothesis(2, between, True),
+        hypothesis(3, below, False),
+        hypothesis(4, below, True),
+    ]
+    bank._drop_unlikely()
+    assert [(h.count, h.fresh) for h in bank.hypotheses] == [(0, False), (1, False)]
+
+
 @pytest.mark.parametrize("iterations", [0, hypotheses.MAX_ITERATIONS])
 def test_a_large_update_is_iterated_until_the_model_meets_the_measurement(
     iterations: int, monkeypatch: pytest.MonkeyPatch

@@ -68,6 +68,13 @@ def test_no_radial_load_and_aligned_drops_the_ripple_states() -> None:
         (
             {
                 "actuator": {"preset": "dong2022-downhole"},
+                "filter": {"min_established_probability": 0.5},
+            },
+            "filter.min_established_probability",
+        ),
+        (
+            {
+                "actuator": {"preset": "dong2022-downhole"},
                 "diagnostics": {"load_warn_fraction": 2.0, "load_error_fraction": 1.0},
             },
             "diagnostics.load_warn_fraction",
