@@ -79,6 +79,10 @@ GROUPS = ("bags", "long", "two-jam", "one-jam", "wear-prior")
 #: Seeds of the generated runs (fixed: the same plan gives the same scenes).
 LONG_SEEDS = {"nominal-10min": 101, "nominal-1h": 102}
 TWO_JAM_SEED = 2026
+#: Two-jam runs of the full plan. The first eight of this seed have no second jam at
+#: standstill, which docs/estimation.md names as not identifiable from the motor current; the
+#: next eight have four, so the floors see that case too (and the first eight are unchanged).
+TWO_JAM_RUNS = 16
 ONE_JAM_SEED = 500
 WEAR_PRIOR_SEED = 300
 #: A two-jam run's jams start at least this long before its end (one cycle is 18-25 s).
@@ -280,7 +284,7 @@ def full_plan(bags: Path = DEFAULT_BAGS) -> Plan:
             configs=("default",),
         ),
     ]
-    two_jam = [BenchScene(s.name, "two-jam", s) for s in two_jam_scenes(8)]
+    two_jam = [BenchScene(s.name, "two-jam", s) for s in two_jam_scenes(TWO_JAM_RUNS)]
     one_jam = [
         BenchScene(s.name, "one-jam", s, configs=("default",)) for s in one_jam_scenes(8, 300.0)
     ]
