@@ -95,9 +95,9 @@ class HealthEstimator:
     def snapshot(self) -> dict[str, Any]:
         """Everything needed to resume after a restart, as plain JSON-able data.
 
-        The hypotheses' filter states and probabilities, the accumulated degradation, the
-        input counters, and a fingerprint of the actuator: :meth:`restore` refuses a snapshot
-        of another geometry or drive train.
+        The hypotheses' filter states, ripple axes and probabilities, the accumulated
+        degradation, the input counters, and a fingerprint of the actuator: :meth:`restore`
+        refuses a snapshot of another geometry or drive train.
         """
         bank = self._bank
         return {
@@ -110,6 +110,7 @@ class HealthEstimator:
                     "log_probability": h.log_prob,
                     "x": h.filter.x.tolist(),
                     "P": h.filter.P.tolist(),
+                    "ripple_axis": None if h.ripple_axis is None else h.ripple_axis.tolist(),
                 }
                 for h in bank.hypotheses
             ],
@@ -135,6 +136,12 @@ class HealthEstimator:
                 x = np.asarray(entry["x"], dtype=np.float64)
                 p = np.asarray(entry["P"], dtype=np.float64)
                 log_probability = float(entry["log_probability"])
+                # Optional: a state saved before the ripple axis existed learns it again.
+                axis = entry.get("ripple_axis")
+                if axis is not None:
+                    axis = np.asarray(axis, dtype=np.float64)
+                    if axis.shape != (2,) or not abs(float(axis @ axis) - 1.0) < 1e-9:
+                        raise SnapshotError(f"hypothesis {k}: ripple_axis is not a unit 2-vector")
                 valid = (
                     0 <= k <= self._bank.n_rollers
                     and x.shape == (dim,)
@@ -145,7 +152,7 @@ class HealthEstimator:
                 )
                 if not valid:
                     raise SnapshotError(f"hypothesis {k} is malformed")
-                states.append((k, bool(entry["fresh"]), x, p, log_probability))
+                states.append((k, bool(entry["fresh"]), x, p, log_probability, axis))
             degradation = Degradation(**{k: float(v) for k, v in snapshot["degradation"].items()})
             accepted = int(snapshot["samples_accepted"])
             rejected = [int(v) for v in snapshot["samples_rejected"]]

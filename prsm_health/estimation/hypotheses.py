@@ -142,15 +142,55 @@ def repair_covariance(matrix: FloatArray, floor: FloatArray | None = None) -> Fl
     return np.asarray(repaired * np.outer(scale, scale), dtype=np.float64)
 
 
+def ripple_walk(
+    ripple: FloatArray,
+    covariance: FloatArray,
+    axis: FloatArray | None,
+    *,
+    moving: bool,
+    dt: float,
+    along_per_sqrt_s: float,
+    across_per_sqrt_s: float,
+    phase_known_rad: float,
+) -> tuple[FloatArray, FloatArray | None]:
+    """Process noise of the ripple phasor r = (c, s) over ``dt``, and the axis it walks along.
+
+    A jammed roller's ripple is the first carrier harmonic of its sliding torque: its amplitude
+    follows the radial load (0.53 N m per kN on dong2022-downhole, whatever the axial load), its
+    phase is set by where the jammed rollers sit on the carrier and does not change
+    (docs/estimation.md). Once the phase is known (in motion, its standard deviation
+    sqrt(v' P v) / |r|^2 below ``phase_known_rad``, v = (-s, c) the direction across r) the
+    phasor walks along its axis u = r / |r| and hardly across it:
+
+        Q = dt (along^2 u u' + across^2 (I - u u'));
+
+    before that, at ``along_per_sqrt_s`` in every direction. The axis is refreshed while the
+    phase is known and kept when it no longer is: the amplitude may shrink through zero with the
+    radial load, and must not turn the phase on the way (a second jammed roller does turn it).
+    Returns Q (2 x 2) and the axis (None while the phase has never been known).
+    """
+    amplitude2 = float(ripple @ ripple)
+    if moving and amplitude2 > 0.0:
+        across = np.array([-ripple[1], ripple[0]])
+        if float(across @ covariance @ across) < phase_known_rad**2 * amplitude2**2:
+            axis = ripple / math.sqrt(amplitude2)
+    if axis is None:
+        return np.eye(2) * (along_per_sqrt_s**2 * dt), None
+    outer = np.outer(axis, axis)
+    return dt * (along_per_sqrt_s**2 * outer + across_per_sqrt_s**2 * (np.eye(2) - outer)), axis
+
+
 @dataclass
 class Hypothesis:
     """One hypothesis: the jam count, its filter, its log probability, whether it is fresh
-    (the jam started in the current block)."""
+    (the jam started in the current block), and the axis its ripple phasor walks along once
+    its phase is known (:func:`ripple_walk`; None before)."""
 
     count: int
     filter: Filter
     log_prob: float
     fresh: bool = False
+    ripple_axis: FloatArray | None = None
 
 
 @dataclass(frozen=True)
@@ -192,9 +232,9 @@ class JamHypotheses:
         if self._ripple:
             self._jump_cov[RIPPLE_COS:, RIPPLE_COS:] = np.eye(2) * params.model.ripple_prior_std**2
         self._spare_filters: list[Filter] = []
-        self._process_cache: tuple[object, tuple[FloatArray, FloatArray, FloatArray]] = (
+        self._process_cache: tuple[object, tuple[FloatArray, FloatArray]] = (
             None,
-            (initial, initial, initial),
+            (initial, initial),
         )
         start = params.model.initial_jammed_rollers
         counts = [start] if self._prune else list(range(self.n_rollers + 1))
@@ -227,33 +267,48 @@ class JamHypotheses:
         kf.P = p.copy()
         return kf
 
-    def _process(self, jammed: int, dt: float, jerk_psd: float) -> tuple[FloatArray, FloatArray]:
-        """Transition and process noise over dt: the load as a white-jerk (constant
-        acceleration) process; the ripple, only when jammed, as a random walk (cached:
-        consecutive blocks share dt and psd)."""
+    def _process(self, dt: float, jerk_psd: float) -> tuple[FloatArray, FloatArray]:
+        """Transition and load process noise over dt: the load as a white-jerk (constant
+        acceleration) process (cached: consecutive blocks share dt and psd). The ripple's noise
+        is each jammed hypothesis' own (:meth:`_ripple_noise`)."""
         key = (dt, jerk_psd)
         if self._process_cache[0] != key:
             transition = np.eye(self._dim)
             transition[LOAD, LOAD_RATE] = transition[LOAD_RATE, LOAD_ACCELERATION] = dt
             transition[LOAD, LOAD_ACCELERATION] = dt**2 / 2.0
-            healthy = np.zeros((self._dim, self._dim))
-            healthy[:LOAD_STATES, :LOAD_STATES] = jerk_psd * np.array(
+            noise = np.zeros((self._dim, self._dim))
+            noise[:LOAD_STATES, :LOAD_STATES] = jerk_psd * np.array(
                 [
                     [dt**5 / 20.0, dt**4 / 8.0, dt**3 / 6.0],
                     [dt**4 / 8.0, dt**3 / 3.0, dt**2 / 2.0],
                     [dt**3 / 6.0, dt**2 / 2.0, dt],
                 ]
             )
-            jammed_noise = healthy.copy()
-            if self._ripple:
-                walk = self._params.model.ripple_random_walk_per_sqrt_s
-                jammed_noise[RIPPLE_COS, RIPPLE_COS] = walk**2 * dt
-                jammed_noise[RIPPLE_SIN, RIPPLE_SIN] = walk**2 * dt
-            for matrix in (transition, healthy, jammed_noise):
+            for matrix in (transition, noise):
                 matrix.setflags(write=False)
-            self._process_cache = (key, (transition, healthy, jammed_noise))
-        transition, healthy, jammed_noise = self._process_cache[1]
-        return transition, jammed_noise if jammed else healthy
+            self._process_cache = (key, (transition, noise))
+        return self._process_cache[1]
+
+    def _ripple_noise(
+        self, h: Hypothesis, load_noise: FloatArray, dt: float, moving: bool
+    ) -> FloatArray:
+        """The process noise of a jammed hypothesis: the load's and its ripple's
+        (:func:`ripple_walk`, which also updates the hypothesis' ripple axis)."""
+        model = self._params.model
+        ripple = slice(RIPPLE_COS, RIPPLE_SIN + 1)
+        walk, h.ripple_axis = ripple_walk(
+            h.filter.x[ripple],
+            h.filter.P[ripple, ripple],
+            h.ripple_axis,
+            moving=moving,
+            dt=dt,
+            along_per_sqrt_s=model.ripple_random_walk_per_sqrt_s,
+            across_per_sqrt_s=model.ripple_phase_walk_per_sqrt_s,
+            phase_known_rad=model.ripple_phase_known_rad,
+        )
+        noise = load_noise.copy()
+        noise[ripple, ripple] = walk
+        return noise
 
     # --- the step -----------------------------------------------------------------------
     def probabilities(self) -> FloatArray:
@@ -345,7 +400,9 @@ class JamHypotheses:
         z = np.array([block.motor_torque_nm])
         for h in self.hypotheses:
             kf = h.filter
-            transition, noise = self._process(h.count, dt, jerk_psd)
+            transition, noise = self._process(dt, jerk_psd)
+            if self._ripple and h.count:
+                noise = self._ripple_noise(h, noise, dt, bool(block.direction))
             if isinstance(kf, UnscentedKalmanFilter):
                 kf.Q = noise
                 kf.predict(dt=dt, fx=_transition_apply, transition=transition)
@@ -484,11 +541,14 @@ class JamHypotheses:
         self.hypotheses = kept
         self._normalise()
 
-    def restore(self, states: list[tuple[int, bool, FloatArray, FloatArray, float]]) -> None:
-        """Replace the hypotheses by saved ones: (count, fresh, x, P, log probability)."""
+    def restore(
+        self, states: list[tuple[int, bool, FloatArray, FloatArray, float, FloatArray | None]]
+    ) -> None:
+        """Replace the hypotheses by saved ones: (count, fresh, x, P, log probability, ripple
+        axis)."""
         self.hypotheses = [
-            Hypothesis(k, self._new_filter(x, self._safe_covariance(p)), log_prob, fresh)
-            for k, fresh, x, p, log_prob in states
+            Hypothesis(k, self._new_filter(x, self._safe_covariance(p)), log_prob, fresh, axis)
+            for k, fresh, x, p, log_prob, axis in states
         ]
         self._normalise()
 

@@ -89,7 +89,12 @@ class ModelParams:
     ripple_prior_std: size of the carrier-frequency torque ripple a new jammed roller adds, per
     cosine and sine component, relative to the load torque at the ripple knee (measurement.py;
     0.3 for one roller with 6 kN radial load on dong2022-downhole).
-    ripple_random_walk_per_sqrt_s: its drift as the radial load changes. jam_rate_per_h: prior
+    ripple_random_walk_per_sqrt_s: its drift as the radial load changes: along its phasor (the
+    amplitude follows the wall's radial load), and in every direction while its phase is not yet
+    known. ripple_phase_walk_per_sqrt_s: its drift across the phasor once the phase is known
+    (the phase is set by which rollers are jammed; hypotheses.ripple_walk).
+    ripple_phase_known_rad: the phase counts as known when its standard deviation is below
+    this. jam_rate_per_h: prior
     rate of a new jam. initial_jammed_rollers: jammed count known at start (after maintenance, 0).
     wear_coefficient_factor: the actuator's wear coefficient relative to the preset's, when
     calibrated (1 = the preset's). wear_coefficient_sigma_ln: log-normal spread of the true
@@ -103,6 +108,8 @@ class ModelParams:
     load_transition_s: float = 1.0
     ripple_prior_std: float = 0.3
     ripple_random_walk_per_sqrt_s: float = 0.1
+    ripple_phase_walk_per_sqrt_s: float = 0.01
+    ripple_phase_known_rad: float = 0.5
     jam_rate_per_h: float = 1e-3
     initial_jammed_rollers: int = 0
     wear_coefficient_factor: float = 1.0
@@ -120,6 +127,8 @@ class ModelParams:
                 "load_transition_s": (0.0, 1e3),
                 "ripple_prior_std": (1e-9, 10.0),
                 "ripple_random_walk_per_sqrt_s": (1e-9, 10.0),
+                "ripple_phase_walk_per_sqrt_s": (1e-9, 10.0),
+                "ripple_phase_known_rad": (1e-6, math.pi),
                 "jam_rate_per_h": (1e-12, 1e6),
                 "wear_coefficient_factor": (1e-6, 1e6),
                 "wear_coefficient_sigma_ln": (0.0, 5.0),

@@ -15,6 +15,7 @@ from prsm_health.estimation.hypotheses import (
     Hypothesis,
     JamHypotheses,
     repair_covariance,
+    ripple_walk,
     safe_sqrt,
 )
 from prsm_health.estimation.inputs import Block
@@ -234,3 +235,41 @@ def test_a_large_update_is_iterated_until_the_model_meets_the_measurement(
         assert h.filter.x[0] == pytest.approx(0.8 * p.rated_load_n, rel=0.01)
     else:
         assert miss_sigmas > 2.0 * hypotheses.ITERATION_SIGMAS
+
+
+WALK = {"along_per_sqrt_s": 0.1, "across_per_sqrt_s": 0.01, "phase_known_rad": 0.5}
+
+
+def test_a_ripple_of_unknown_phase_walks_in_every_direction() -> None:
+    """Phase std about 1 rad (perpendicular std 0.3 on an amplitude of 0.3): isotropic."""
+    ripple = np.array([0.3, 0.0])
+    q, axis = ripple_walk(ripple, np.eye(2) * 0.09, None, moving=True, dt=0.04, **WALK)
+    assert axis is None
+    np.testing.assert_allclose(q, np.eye(2) * 0.1**2 * 0.04)
+
+
+def test_a_ripple_of_known_phase_walks_along_its_phasor_only() -> None:
+    """Phase std 0.1 rad: the amplitude may follow the radial load (0.1/sqrt(s) along the
+    phasor), the phase hardly moves (0.01/sqrt(s) across it)."""
+    ripple = np.array([0.3, 0.4])  # amplitude 0.5
+    covariance = np.eye(2) * 0.05**2
+    q, axis = ripple_walk(ripple, covariance, None, moving=True, dt=0.04, **WALK)
+    assert axis is not None
+    np.testing.assert_allclose(axis, [0.6, 0.8])
+    across = np.array([-0.8, 0.6])
+    assert float(axis @ q @ axis) == pytest.approx(0.1**2 * 0.04)
+    assert float(across @ q @ across) == pytest.approx(0.01**2 * 0.04)
+    np.testing.assert_allclose(q, q.T)
+
+
+def test_the_ripple_axis_is_kept_when_the_amplitude_shrinks_and_not_set_at_standstill() -> None:
+    """A phasor that shrinks towards zero (the wall's radial load falls) no longer has a known
+    phase, but keeps its axis: it cannot turn by passing through zero. At standstill the
+    carrier does not turn, so no axis is learned there."""
+    known = np.eye(2) * 0.05**2
+    _, axis = ripple_walk(np.array([0.5, 0.0]), known, None, moving=True, dt=0.04, **WALK)
+    q, kept = ripple_walk(np.array([0.01, 0.0]), known, axis, moving=True, dt=0.04, **WALK)
+    assert kept is axis
+    assert float(np.array([0.0, 1.0]) @ q @ np.array([0.0, 1.0])) == pytest.approx(0.01**2 * 0.04)
+    _, none = ripple_walk(np.array([0.5, 0.0]), known, None, moving=False, dt=0.5, **WALK)
+    assert none is None

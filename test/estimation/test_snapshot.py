@@ -38,6 +38,22 @@ def test_a_restored_estimator_continues_the_precision_loss() -> None:
     assert after[0].axial_load_n == pytest.approx(before[-1].axial_load_n, rel=0.05)
 
 
+def test_the_ripple_axes_survive_a_restart() -> None:
+    """A jammed hypothesis' ripple axis (its phase, hypotheses.ripple_walk) is saved and
+    restored; a state saved without axes resumes with them unknown."""
+    first = HealthEstimator(params())
+    first.process(moving(1.0))
+    saved = first.snapshot()
+    saved["hypotheses"][0]["ripple_axis"] = [0.6, -0.8]
+    resumed = HealthEstimator(params())
+    resumed.restore(json.loads(json.dumps(saved)))
+    np.testing.assert_array_equal(resumed._bank.hypotheses[0].ripple_axis, [0.6, -0.8])
+    for entry in saved["hypotheses"]:
+        del entry["ripple_axis"]
+    resumed.restore(saved)
+    assert all(h.ripple_axis is None for h in resumed._bank.hypotheses)
+
+
 def test_a_state_of_another_actuator_is_refused() -> None:
     saved = HealthEstimator(params()).snapshot()
     with pytest.raises(SnapshotError, match="another actuator"):
@@ -52,6 +68,7 @@ def test_a_state_of_another_actuator_is_refused() -> None:
         lambda s: s["hypotheses"][0].update(P=[[float("nan")] * 5] * 5),
         lambda s: s["degradation"].update(precision_loss_m="a lot"),
         lambda s: s.update(format=99),
+        lambda s: s["hypotheses"][0].update(ripple_axis=[0.0, 2.0]),
     ],
 )
 def test_a_malformed_state_is_refused(damage: object) -> None:
