@@ -20,7 +20,7 @@ import numpy as np
 
 from prsm_health.estimation.degradation import Degradation, DegradationIntegrator
 from prsm_health.estimation.estimate import EstimateEvent, HealthState
-from prsm_health.estimation.hypotheses import JamHypotheses, StepResult
+from prsm_health.estimation.hypotheses import DIVERGED_LOAD_RATIO, JamHypotheses, StepResult
 from prsm_health.estimation.inputs import Block, InputCounters, SampleBlocker, merge_blocks
 from prsm_health.estimation.measurement import LOAD, TorqueModel
 from prsm_health.estimation.params import EstimatorParams
@@ -241,13 +241,17 @@ class HealthEstimator:
         return model.load_jerk_psd_n2_per_s5
 
     def _diverged(self, block: Block, step: StepResult) -> bool:
-        """Gated for too long, or the mean NIS of the likeliest hypothesis too large."""
+        """Gated for too long, the likeliest load beyond DIVERGED_LOAD_RATIO of the rated
+        load, or the mean NIS of the likeliest hypothesis too large."""
         self._gated_run = self._gated_run + 1 if step.gated else 0
         if self._gated_run >= GATED_BLOCKS_BEFORE_RESET:
             return True
+        likeliest = self._bank.most_likely()
+        if abs(float(likeliest.filter.x[LOAD])) > DIVERGED_LOAD_RATIO * self.params.rated_load_n:
+            return True
         if step.gated:
             return False
-        best = self._bank.hypotheses.index(self._bank.most_likely())
+        best = self._bank.hypotheses.index(likeliest)
         self._nis.append((block.stamp_s, step.nis[best]))
         window = self.params.filter.divergence_window_s
         while self._nis and self._nis[0][0] < block.stamp_s - window:

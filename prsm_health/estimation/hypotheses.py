@@ -100,6 +100,13 @@ LARGE_UPDATE_RATIO = 0.02
 ITERATION_SIGMAS = 3.0
 MAX_ITERATIONS = 3
 
+#: A load beyond this many times the rated load has diverged, whatever its NIS: the motor
+#: cannot drive it (at its current limit the default actuator's screw carries about five times
+#: its rated load). Seen with the UKF, whose spread can straddle F = 0, where a self-locked
+#: screw's friction slope changes sign. The estimator re-initialises the load there, and the
+#: re-initialisation restarts such a load from zero.
+DIVERGED_LOAD_RATIO = 10.0
+
 #: Smallest variance kept on each state, relative to its initial variance.
 VARIANCE_FLOOR_RATIO = 1e-12
 
@@ -554,10 +561,15 @@ class JamHypotheses:
 
     def reinitialise_load(self, *, keep_load: bool = False) -> None:
         """Forget the load's derivatives, and unless ``keep_load`` the load too (after a time
-        reset or a divergence; after a hole in the data, where the load may have moved on)."""
+        reset or a divergence; after a hole in the data, where the load may have moved on).
+        A forgotten load keeps its mean as the start of its re-acquisition, unless that lies
+        beyond DIVERGED_LOAD_RATIO of the rated load: then it starts from zero."""
         forget = range(LOAD + 1 if keep_load else LOAD, LOAD_STATES)
+        diverged = DIVERGED_LOAD_RATIO * self._params.rated_load_n
         for h in self.hypotheses:
             x, p = h.filter.x.copy(), h.filter.P.copy()
+            if not keep_load and abs(float(x[LOAD])) > diverged:
+                x[LOAD] = 0.0
             for i in forget:
                 if i != LOAD:
                     x[i] = 0.0

@@ -16,6 +16,7 @@ from prsm_health.estimation.metrics import Metrics, score
 from prsm_health.estimation.params import EstimatorParams, Fidelity, ModelParams
 from prsm_health.scenes.scene import scene_from_mapping
 from prsm_health.scenes.simulator import SimulationChunk, simulate
+from prsm_health.signals import MotorSamples
 
 RPM = 2.0 * math.pi / 60.0
 
@@ -170,3 +171,19 @@ def test_a_sensor_clock_jumping_by_decades_is_a_gap_not_a_jam() -> None:
     error = np.array([s.axial_load_n for s in tail]) - truth
     rated = EstimatorParams(actuator=scene.actuator).rated_load_n
     assert float(np.sqrt(np.mean(error**2))) < 0.01 * rated
+
+
+def test_a_load_beyond_what_the_motor_can_drive_is_a_divergence() -> None:
+    """A likeliest load of 200 times the rated load (seen with the UKF after a false count of
+    three jammed rollers) is re-initialised whatever its NIS, and restarts from zero."""
+    estimator = HealthEstimator(EstimatorParams(actuator=scene_from_mapping(downhole()).actuator))
+    n = 2000
+    t = np.arange(n) / 1000.0
+    rng = np.random.default_rng(1)
+    samples = MotorSamples(t, 6.0 + rng.normal(0, 0.05, n), np.full(n, 150.0), 150.0 * t)
+    estimator.process(samples[:1000])
+    for h in estimator._bank.hypotheses:
+        h.filter.x[0] = 200.0 * estimator.params.rated_load_n
+    states = estimator.process(samples[1000:])
+    assert states[0].event == EstimateEvent.DIVERGENCE_RECOVERED
+    assert all(abs(s.axial_load_n) < 10.0 * estimator.params.rated_load_n for s in states)
