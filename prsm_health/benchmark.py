@@ -432,6 +432,11 @@ class JamOnset:
     """A true jam onset of a run, its category from the truth and when it was identified.
 
     count: the jam count it starts (1 = first jam). cycle_s: the run's motion cycle.
+    ripple_after: the size of the jammed rollers' carrier ripple after the onset, in units of
+    one jammed roller's (:func:`ripple_phasor`; 0 where the rollers' ripples cancel).
+    ripple_turn_deg: how far the onset turns that ripple's phase; None for a first jam or where
+    the ripple before or after is zero (no phase to turn). The ripple is the only signal in the
+    motor current that tells k from k + 1 jammed rollers (docs/estimation.md).
     """
 
     scene: str
@@ -441,6 +446,8 @@ class JamOnset:
     category: str
     delay_s: float | None
     cycle_s: float | None
+    ripple_after: float = 1.0
+    ripple_turn_deg: float | None = None
 
     @property
     def within_cycle(self) -> bool:
@@ -589,23 +596,56 @@ def onset_category(truth: TruthSamples, onset_s: float, moving_speed_rad_s: floa
     return "stroke end/low load"
 
 
+#: A ripple phasor smaller than this (units of one roller's) counts as cancelled.
+RIPPLE_CANCELLED = 1e-9
+
+
+def ripple_phasor(jammed: NDArray[np.bool_]) -> complex:
+    """The first carrier harmonic of the jammed rollers' sliding torque, in units of one
+    roller's: roller i (from 0) sits at the position angle theta + 2 pi i / N (000 eq. 8), so
+    identical jammed rollers add their ripples as unit phasors turned by 2 pi i / N. A second
+    roller m positions away turns the sum by pi m / N and scales it by 2 |cos(pi m / N)|;
+    opposite rollers (m = N / 2) cancel (docs/estimation.md, "The ripple's phase")."""
+    positions = np.flatnonzero(jammed)
+    return complex(np.exp(2j * np.pi * positions / len(jammed)).sum())
+
+
+def ripple_change(before: complex, after: complex) -> tuple[float, float | None]:
+    """|after| and the angle from ``before`` to ``after`` in degrees (None where either
+    vanishes: a first jam has no phase before it, a cancelled ripple none after)."""
+    if abs(before) < RIPPLE_CANCELLED or abs(after) < RIPPLE_CANCELLED:
+        return abs(after), None
+    return abs(after), math.degrees(abs(np.angle(after / before)))
+
+
 def jam_onsets(
     run: Run, truth: TruthSamples, cycle_s: float | None, params: EstimatorParams
 ) -> list[JamOnset]:
-    """The run's true jam onsets with their category and detection delay."""
+    """The run's true jam onsets with their category, the ripple change they make (from the
+    truth's jammed rollers) and their detection delay."""
     moving = MOVING_FRACTION * params.actuator.preset.largest_speed_rpm * RPM_TO_RAD_S
-    return [
-        JamOnset(
-            scene=run.scene,
-            config=run.config,
-            onset_s=jam.onset_s,
-            count=jam.count,
-            category=onset_category(truth, jam.onset_s, moving),
-            delay_s=jam.delay_s,
-            cycle_s=cycle_s,
+    onsets = []
+    for jam in run.metrics.jams:
+        # The onset is the stamp of the truth's first sample with the new count.
+        after = min(int(np.searchsorted(truth.stamp_s, jam.onset_s)), len(truth) - 1)
+        ripple_after, turn = ripple_change(
+            ripple_phasor(truth.roller_jammed[max(after - 1, 0)]),
+            ripple_phasor(truth.roller_jammed[after]),
         )
-        for jam in run.metrics.jams
-    ]
+        onsets.append(
+            JamOnset(
+                scene=run.scene,
+                config=run.config,
+                onset_s=jam.onset_s,
+                count=jam.count,
+                category=onset_category(truth, jam.onset_s, moving),
+                delay_s=jam.delay_s,
+                cycle_s=cycle_s,
+                ripple_after=ripple_after,
+                ripple_turn_deg=turn,
+            )
+        )
+    return onsets
 
 
 # --- running --------------------------------------------------------------------------------

@@ -21,6 +21,7 @@ import numpy as np
 from prsm_health.benchmark import (
     BAG_SCENES,
     ONSET_CATEGORIES,
+    RIPPLE_CANCELLED,
     BenchResults,
     JamOnset,
     Run,
@@ -142,7 +143,9 @@ def _jam_floors(onsets: list[JamOnset]) -> list[Floor]:
         for count in sorted({o.count for o in found}):
             group = [o for o in found if o.count == count]
             hits = sum(o.within_cycle for o in group)
-            parts.append(f"jam {count}: {hits}/{len(group)}")
+            cancelled = sum(o.ripple_after < RIPPLE_CANCELLED for o in group)
+            note = f" ({cancelled} with the ripple cancelled)" if cancelled else ""
+            parts.append(f"jam {count}: {hits}/{len(group)}{note}")
         delays = [o.delay_s for o in found if o.delay_s is not None]
         median = f", median delay {np.median(delays):.2f} s" if delays else ""
         floors.append(
@@ -534,6 +537,16 @@ def _decode(results: BenchResults) -> list[str]:
     return _table(["bag", "rosbags decode", "replay time / decode time"], rows)
 
 
+def _ripple(onset: JamOnset) -> str:
+    """The jammed rollers' ripple after the onset, in units of one roller's, and how far the
+    onset turned it (benchmark.ripple_change)."""
+    if onset.ripple_after < RIPPLE_CANCELLED:
+        return "0 (cancelled)"
+    if onset.ripple_turn_deg is None:
+        return f"{onset.ripple_after:.2f} (new)"
+    return f"{onset.ripple_after:.2f} ({onset.ripple_turn_deg:.0f} deg)"
+
+
 def _onsets(results: BenchResults) -> list[str]:
     rows = []
     for o in results.jam_onsets:
@@ -545,12 +558,22 @@ def _onsets(results: BenchResults) -> list[str]:
                 f"{o.onset_s:.2f}",
                 str(o.count),
                 o.category,
+                _ripple(o),
                 _delay(o.delay_s),
                 _number(o.cycle_s, ".1f"),
                 "yes" if o.within_cycle else "**no**",
             ]
         )
-    header = ["scene", "onset s", "jam", "category", "identified after", "cycle s", "in 1 cycle"]
+    header = [
+        "scene",
+        "onset s",
+        "jam",
+        "category",
+        "ripple after (turn)",
+        "identified after",
+        "cycle s",
+        "in 1 cycle",
+    ]
     return _table(header, rows)
 
 

@@ -21,11 +21,14 @@ from prsm_health.benchmark import (
     CONFIGURATIONS,
     BenchResults,
     BenchScene,
+    JamOnset,
     Plan,
     cycle_period_s,
     one_jam_scenes,
     onset_category,
     quick_plan,
+    ripple_change,
+    ripple_phasor,
     run_benchmark,
     select,
     skipped_configurations,
@@ -40,6 +43,8 @@ from prsm_health.benchmark_report import (
     write_results,
 )
 from prsm_health.cli import main
+from prsm_health.physics.presets import load_preset
+from prsm_health.physics.roller_table import roller_values
 from prsm_health.scenes.recording import record
 from prsm_health.scenes.scene import load_scene, scene_from_mapping
 from prsm_health.scenes.simulator import Simulator
@@ -107,6 +112,21 @@ def test_jam_onsets_are_categorised_and_timed(results: BenchResults) -> None:
         assert onset.cycle_s is not None and onset.within_cycle == (
             onset.delay_s is not None and onset.delay_s <= onset.cycle_s
         )
+        assert onset.ripple_after == pytest.approx(1.0) and onset.ripple_turn_deg is None
+
+
+def test_onsets_whose_ripple_cancels_are_named(results: BenchResults, tmp_path: Path) -> None:
+    """A second jam of the roller opposite the first leaves no ripple: the floor and the
+    onset table say so (its miss is not a failure the motor current could avoid)."""
+    cancelled = JamOnset("two-jam-x", "default", 20.0, 2, "standstill", None, 20.0, 0.0, None)
+    more = dataclasses.replace(results, jam_onsets=[*results.jam_onsets, cancelled])
+    standstill = next(f for f in floors(more) if f.name.endswith(": standstill"))
+    assert standstill.measured == "jam 2: 0/1 (1 with the ripple cancelled)"
+    assert standstill.passed is False
+    write_results(more, tmp_path / "out")
+    text = (tmp_path / "out" / "results.md").read_text()
+    assert "| two-jam-x | 20.00 | 2 | standstill | 0 (cancelled) | never | 20.0 | **no** |" in text
+    assert "| 1.00 (new) |" in text  # tiny-bag's first jam
 
 
 def test_files_hold_the_measured_numbers(results: BenchResults, tmp_path: Path) -> None:
@@ -191,6 +211,41 @@ def test_onset_categories_from_the_truth() -> None:
     }
     for index, category in expected.items():
         assert onset_category(truth, float(truth.stamp_s[index]), 1.0) == category, index
+
+
+@pytest.mark.parametrize("rollers", [(0,), (0, 1), (0, 3), (2, 6), (0, 5), (2, 6, 7)])
+def test_ripple_phasor_is_the_physics_core_carrier_harmonic(rollers: tuple[int, ...]) -> None:
+    """The first carrier harmonic of the jammed rollers' sliding torque from the physics core
+    (000 eq. 8 with 002 eq. 15-16, 30 kN axial, 4 kN radial, 72 carrier angles) is one
+    roller's harmonic times ripple_phasor: in size and in phase; opposite rollers cancel."""
+    angles = np.linspace(0.0, 2.0 * np.pi, 72, endpoint=False)
+    values = roller_values(
+        load_preset("dong2022-downhole"), 30e3, radial_load_n=4e3, carrier_angle_rad=angles
+    )
+    jammed = np.zeros(values.jammed_torque_nm.shape[-1], dtype=bool)
+    jammed[list(rollers)] = True
+    harmonic = np.exp(-1j * angles) @ values.jammed_torque_nm
+    one_roller = harmonic[0]
+    assert abs(one_roller) > 1.0  # N m, summed over the angles: a real ripple to compare with
+    expected = one_roller * ripple_phasor(jammed)
+    assert abs(harmonic[jammed].sum() - expected) < 1e-3 * abs(one_roller)
+
+
+def test_ripple_change_of_a_second_roller() -> None:
+    """m positions away: the ripple scales by 2 |cos(pi m / N)| and turns by pi m / N; a
+    first jam and a cancelled ripple have no phase to turn."""
+    first = np.zeros(10, dtype=bool)
+    first[2] = True
+    assert ripple_change(0j, ripple_phasor(first)) == (pytest.approx(1.0), None)
+    for m in range(1, 10):
+        both = first.copy()
+        both[(2 + m) % 10] = True
+        size, turn = ripple_change(ripple_phasor(first), ripple_phasor(both))
+        assert size == pytest.approx(2.0 * abs(math.cos(math.pi * m / 10)), abs=1e-12)
+        if m == 5:
+            assert turn is None
+        else:
+            assert turn == pytest.approx(math.degrees(math.pi * min(m, 10 - m) / 10))
 
 
 def test_two_jam_runs_are_reproducible_and_leave_a_cycle_after_each_jam() -> None:
