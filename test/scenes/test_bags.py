@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import shutil
+from dataclasses import fields
 from pathlib import Path
 
 import numpy as np
@@ -65,12 +66,37 @@ def test_bundled_bag_decodes_with_rosbags_and_mcap(name: str) -> None:
     np.testing.assert_array_equal(np.array(loads), truth.axial_load_n)
 
 
+#: Relative difference allowed between a ground-truth value regenerated on another CPU and
+#: the bundled one: numpy chooses its SIMD kernels for pow, exp, sin, ... at run time, and
+#: they differ in the last bits between CPUs (measured on an AVX2-only machine against the
+#: bags written on the earlier CI machines: friction, precision loss and fatigue damage of
+#: stationary-hold differ by at most 6.6e-15 relative, every other field is identical).
+TRUTH_RTOL = 1e-12
+
+
 def test_a_bundled_bag_is_what_its_scene_regenerates(tmp_path: Path) -> None:
+    """The same metadata, the same motor samples bit for bit (the sensors quantise them),
+    and the same ground truth to the last bits of the CPU's floating point. (On one machine
+    the whole .mcap regenerates byte for byte: test_writer and ``make bags-check``.)"""
     name = "stationary-hold"
     out = tmp_path / name
     assert main(["simulate", "--scene", name, "--out", str(out)]) == 0
-    for file in ("metadata.yaml", f"{name}.mcap"):
-        assert (out / file).read_bytes() == (BAGS / name / file).read_bytes(), file
+    assert (out / "metadata.yaml").read_bytes() == (BAGS / name / "metadata.yaml").read_bytes()
+    regenerated, bundled = (read_motor_samples(b, InputTopics()) for b in (out, BAGS / name))
+    for field in fields(bundled):
+        np.testing.assert_array_equal(
+            getattr(regenerated, field.name), getattr(bundled, field.name), field.name
+        )
+    regenerated_truth, bundled_truth = read_truth(out), read_truth(BAGS / name)
+    assert regenerated_truth is not None and bundled_truth is not None
+    for field in fields(bundled_truth):
+        np.testing.assert_allclose(
+            getattr(regenerated_truth, field.name),
+            getattr(bundled_truth, field.name),
+            rtol=TRUTH_RTOL,
+            atol=0.0,
+            err_msg=field.name,
+        )
 
 
 def test_simulate_writes_joint_states_and_refuses_to_overwrite(
