@@ -4,6 +4,7 @@ recovers (real processes, the node's clock is the system clock here). The same n
 
 from __future__ import annotations
 
+import time
 from pathlib import Path
 from typing import Any
 
@@ -61,11 +62,15 @@ def test_stale_then_recovered(ros: None, tmp_path: Path) -> None:
             assert series()[-1][1][AXIAL_LOAD]["message"].startswith("stale: no input yet")
 
             before = len(series())
+            started = time.monotonic()
             play(first, listener=listener)
+            played_s = time.monotonic() - started
             listener.wait_for(lambda: stale(series()[-1][1]), 5.0, "STALE after the inputs")
-            # ~/health at HEALTH_RATE_HZ (2 s of bag: 10), not every estimate (50 blocks).
+            # ~/health at HEALTH_RATE_HZ, not every estimate (2 s of bag: 50 blocks): at most
+            # one per tick of the node's timer while the bag played (longer than the bag's 2 s
+            # on a busy machine), at least one per tick of those 2 s but the first and last.
             stamps = [h["stamp"] for h in listener.health]
-            assert 8 <= len(stamps) <= 12, stamps
+            assert 8 <= len(stamps) <= played_s * HEALTH_RATE_HZ + 2, (stamps, played_s)
             assert stamps == sorted(set(stamps))  # each estimate once, the newest at each tick
             during = series()[before:]
             last_fresh = max(i for i, (_, st) in enumerate(during) if not stale(st))
@@ -81,9 +86,16 @@ def test_stale_then_recovered(ros: None, tmp_path: Path) -> None:
             assert message.startswith("stale: no input for")
             assert "last: no jammed roller" in message
 
+            # Recovered while the second bag plays. (Not the latest message: the inputs stop
+            # again at its end, and the player's exit may take longer than the timeout.)
+            before = len(series())
             play(second, listener=listener)
-            listener.wait_for(lambda: not stale(series()[-1][1]), 5.0, "recovery")
-            assert {s["level"] for s in series()[-1][1].values()} <= {"OK", "WARN"}
+
+            def recovered() -> list[dict[str, dict[str, Any]]]:
+                return [st for _, st in series()[before:] if not stale(st)]
+
+            listener.wait_for(lambda: bool(recovered()), 5.0, "recovery")
+            assert {s["level"] for s in recovered()[0].values()} <= {"OK", "WARN"}
             assert node.alive()
     finally:
         listener.close()
