@@ -44,7 +44,8 @@ $(REQS_STAMP): requirements.txt | $(PY)
 	touch $@
 
 # Build the interface package with plain cmake and install it into the venv prefix.
-$(MSGS_STAMP): $(REQS_STAMP) $(MSGS)/CMakeLists.txt $(MSGS)/package.xml $(wildcard $(MSGS)/msg/*.msg)
+$(MSGS_STAMP): $(REQS_STAMP) $(MSGS)/CMakeLists.txt $(MSGS)/package.xml \
+		$(wildcard $(MSGS)/msg/*.msg) $(wildcard $(MSGS)/srv/*.srv)
 	rm -rf $(BUILD)/msgs
 	mkdir -p $(BUILD)
 	touch $(BUILD)/COLCON_IGNORE

@@ -11,6 +11,7 @@ docs/estimation.md explains the model, what is observable and each option.
 
 from __future__ import annotations
 
+import dataclasses
 import hashlib
 import math
 from collections import deque
@@ -164,6 +165,43 @@ class HealthEstimator:
         self._degradation.state = degradation
         self.counters.accepted = accepted
         self.counters.rejected = rejected
+
+    def reset_after_maintenance(
+        self, jammed_rollers: int, *, reset_precision_loss: bool, reset_fatigue_damage: bool
+    ) -> list[HealthState]:
+        """Maintenance: the jammed-roller count is known again, replaced parts are unworn.
+
+        The filter's jams only ever increase (docs/estimation.md); maintenance is the one way
+        back. The samples fed before the call belong to before the maintenance: their pending
+        block is closed and estimated first, as at the end of a bag (:meth:`finish`), and
+        those estimates are returned. Then ``jammed_rollers`` (0..N, usually 0 once the
+        jammed rollers were freed or replaced) becomes certain, with the likeliest
+        hypothesis' load and an unknown ripple (:meth:`JamHypotheses.reset_count`).
+        ``reset_precision_loss``: the worn parts were replaced, so the precision loss and its
+        uncertainty start again from zero; ``reset_fatigue_damage`` likewise for the Miner
+        damage.
+
+        Raises:
+            ValueError: ``jammed_rollers`` outside 0..N (N: the preset's rollers); nothing is
+                done then.
+        """
+        rollers = self._bank.n_rollers
+        if not 0 <= jammed_rollers <= rollers:
+            raise ValueError(
+                f"jammed_rollers: must be within 0..{rollers} (the rollers of "
+                f"{self.params.actuator.preset.name}), got {jammed_rollers}"
+            )
+        before = self.finish()
+        self._bank.reset_count(jammed_rollers)
+        state = self._degradation.state
+        if reset_precision_loss:
+            state = dataclasses.replace(
+                state, precision_loss_m=0.0, load_error_m=0.0, jam_error_m=0.0, radial_error_m=0.0
+            )
+        if reset_fatigue_damage:
+            state = dataclasses.replace(state, fatigue_damage=0.0, fatigue_error=0.0)
+        self._degradation.state = state
+        return before
 
     def process(self, samples: MotorSamples) -> list[HealthState]:
         """Feed samples (any number); returns the estimates of the blocks they complete."""

@@ -243,16 +243,31 @@ class JamHypotheses:
             None,
             (initial, initial),
         )
-        start = params.model.initial_jammed_rollers
-        counts = [start] if self._prune else list(range(self.n_rollers + 1))
+        self.hypotheses: list[Hypothesis] = []
+        self._start(params.model.initial_jammed_rollers, np.zeros(self._dim), np.diag(initial))
+
+    def _start(self, count: int, x: FloatArray, p: FloatArray) -> None:
+        """Certainty of ``count`` jammed rollers at (x, P): one hypothesis, or with pruning off
+        every count, the others at probability zero."""
+        self._spare_filters += [h.filter for h in self.hypotheses]
+        counts = [count] if self._prune else list(range(self.n_rollers + 1))
         self.hypotheses = [
-            Hypothesis(
-                k,
-                self._new_filter(np.zeros(self._dim), np.diag(initial)),
-                0.0 if k == start else -math.inf,
-            )
-            for k in counts
+            Hypothesis(k, self._new_filter(x, p), 0.0 if k == count else -math.inf) for k in counts
         ]
+
+    def reset_count(self, count: int) -> None:
+        """Maintenance: ``count`` jammed rollers for certain. The load and its derivatives
+        are the likeliest hypothesis' (maintenance does not move the load); the ripple is
+        unknown again (prior variance, no phase): the rollers jammed now decide it."""
+        best = self.most_likely().filter
+        x, p = best.x.copy(), best.P.copy()
+        if self._ripple:
+            ripple = slice(RIPPLE_COS, RIPPLE_SIN + 1)
+            x[ripple] = 0.0
+            p[ripple, :] = 0.0
+            p[:, ripple] = 0.0
+            p[ripple, ripple] = np.diag(self._initial_var[ripple])
+        self._start(count, x, p)
 
     # --- filters ------------------------------------------------------------------------
     def _new_filter(self, x: FloatArray, p: FloatArray) -> Filter:

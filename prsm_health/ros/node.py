@@ -32,6 +32,7 @@ from typing import Any
 import numpy as np
 from diagnostic_msgs.msg import DiagnosticArray
 from prsm_health_msgs.msg import HealthEstimate, MotorState
+from prsm_health_msgs.srv import ResetAfterMaintenance
 from rcl_interfaces.msg import (
     FloatingPointRange,
     IntegerRange,
@@ -140,6 +141,7 @@ class HealthNode(LifecycleNode):
         self._persistence = PersistenceHealth(state_file="")
         self._health_pub: Any = None
         self._diagnostics_pub: Any = None
+        self._reset_service: Any = None
         self._subscription: Any = None
         self._timers: list[Any] = []
         self._reset_run_state()
@@ -239,6 +241,9 @@ class HealthNode(LifecycleNode):
         self._diagnostics_pub = self.create_lifecycle_publisher(
             DiagnosticArray, "/diagnostics", reliable
         )
+        self._reset_service = self.create_service(
+            ResetAfterMaintenance, "~/reset_after_maintenance", self._on_reset
+        )
 
     def on_activate(self, state: LifecycleState) -> TransitionCallbackReturn:
         config = self._config
@@ -309,6 +314,9 @@ class HealthNode(LifecycleNode):
             if publisher is not None:
                 self.destroy_lifecycle_publisher(publisher)
         self._health_pub = self._diagnostics_pub = None
+        if self._reset_service is not None:
+            self.destroy_service(self._reset_service)
+            self._reset_service = None
         self._config = self._estimator = self._store = None
 
     def _reset_run_state(self) -> None:
@@ -357,19 +365,30 @@ class HealthNode(LifecycleNode):
                 return
             samples, received = self._pending.take()
             states = estimator.process(samples) if len(samples) else []
-            now = self._now_s()
-            counters = estimator.counters
-            rejected = rejected_by_reason(counters, self._node_rejects)
-            self._tracker.inputs.update(now, received, counters.accepted, rejected)
-            self._tracker.events.observe(now, states, counters)
-            if states:
-                self._latest = states[-1]
-                self._latest_published = False
-                if config.health_rate_hz == 0.0:
-                    for state in states:
-                        self._publish_health(state)
+            self._took(estimator, config, states, received)
         except Exception as exc:
             self._fault("processing", exc)
+
+    def _took(
+        self,
+        estimator: HealthEstimator,
+        config: NodeConfig,
+        states: list[HealthState],
+        received: int,
+    ) -> None:
+        """Track the inputs and events of new estimates and publish them (or keep the newest
+        for the health timer)."""
+        now = self._now_s()
+        counters = estimator.counters
+        rejected = rejected_by_reason(counters, self._node_rejects)
+        self._tracker.inputs.update(now, received, counters.accepted, rejected)
+        self._tracker.events.observe(now, states, counters)
+        if states:
+            self._latest = states[-1]
+            self._latest_published = False
+            if config.health_rate_hz == 0.0:
+                for state in states:
+                    self._publish_health(state)
 
     def _publish_health(self, state: HealthState) -> None:
         replaced: Counter[str] = Counter()
@@ -398,6 +417,37 @@ class HealthNode(LifecycleNode):
             self._diagnostics_pub.publish(diagnostic_array(statuses, now))
         except Exception as exc:
             self._fault("diagnostics", exc)
+
+    def _on_reset(self, request: Any, response: Any) -> Any:
+        """``~/reset_after_maintenance``: the samples received so far are estimated first
+        (they belong to before the maintenance), then the estimator is reset
+        (:meth:`HealthEstimator.reset_after_maintenance`) and the state saved at once."""
+        try:
+            estimator, config = self._estimator, self._config
+            if estimator is None or config is None:
+                response.success, response.message = False, "not configured: nothing to reset"
+                return response
+            self._on_batch()
+            before = estimator.reset_after_maintenance(
+                request.jammed_rollers,
+                reset_precision_loss=request.reset_precision_loss,
+                reset_fatigue_damage=request.reset_fatigue_damage,
+            )
+            self._took(estimator, config, before, 0)
+            reset = [f"jammed rollers {request.jammed_rollers}"]
+            reset += ["precision loss 0"] if request.reset_precision_loss else []
+            reset += ["fatigue damage 0"] if request.reset_fatigue_damage else []
+            response.success = True
+            response.message = "reset after maintenance: " + ", ".join(reset)
+            self.get_logger().info(f"{response.message} (note: {request.note!r})")
+            self._saved_at_samples = -1  # save now, even without new samples
+            self._save()
+        except ValueError as exc:
+            response.success, response.message = False, f"nothing reset: {exc}"
+        except Exception as exc:
+            self._fault("reset", exc)
+            response.success, response.message = False, f"nothing reset: {exc!r}"
+        return response
 
     def _on_save(self) -> None:
         try:

@@ -8,6 +8,7 @@ import math
 from typing import Any
 
 import numpy as np
+import pytest
 
 from prsm_health.benchmark import chunked, params_for, scored, two_jam_scenes
 from prsm_health.estimation.estimate import EstimateEvent, HealthState
@@ -187,3 +188,44 @@ def test_a_load_beyond_what_the_motor_can_drive_is_a_divergence() -> None:
     states = estimator.process(samples[1000:])
     assert states[0].event == EstimateEvent.DIVERGENCE_RECOVERED
     assert all(abs(s.axial_load_n) < 10.0 * estimator.params.rated_load_n for s in states)
+
+
+def test_maintenance_resets_the_count_and_only_what_was_replaced() -> None:
+    """Jams only ever increase, except by maintenance: after "0 jammed" the next estimate is
+    certain of 0; precision loss and fatigue damage start from zero only
+    when their parts were replaced. Here the roller was not freed (the simulated jam goes on):
+    its ripple in the next stroke says so, and count 1 comes back."""
+    scene = scene_from_mapping(downhole(jams=[{"time_s": 4.0, "roller": 3}]))
+    result = simulate(scene)
+    params = EstimatorParams(actuator=scene.actuator)
+    estimator = HealthEstimator(params)
+    cut = int(np.searchsorted(result.motor.stamp_s, 12.0))  # standstill after two strokes
+    before = estimator.process(result.motor[:cut])[-1]
+    assert int(np.argmax(before.jam_probabilities)) == 1
+    assert before.precision_loss_m > 0.0 and before.fatigue_damage > 0.0
+    other = HealthEstimator(params)
+    other.restore(estimator.snapshot())
+    for bad in (-1, 11):
+        expected = rf"jammed_rollers: must be within 0\.\.10 .*got {bad}"
+        with pytest.raises(ValueError, match=expected):
+            estimator.reset_after_maintenance(
+                bad, reset_precision_loss=True, reset_fatigue_damage=True
+            )
+
+    pending = estimator.reset_after_maintenance(
+        0, reset_precision_loss=True, reset_fatigue_damage=False
+    )
+    # The samples fed before the maintenance are estimated before it.
+    assert pending and all(int(np.argmax(s.jam_probabilities)) == 1 for s in pending)
+    after = estimator.process(result.motor[cut:]) + estimator.finish()
+    first = after[0]
+    assert first.jam_probabilities[0] > 1.0 - 1e-6  # the prior of a jam in 0.5 s: 1.4e-7
+    assert first.precision_loss_m == first.precision_loss_std_m == 0.0
+    assert first.fatigue_damage == before.fatigue_damage  # at standstill nothing accrues
+    assert int(np.argmax(after[-1].jam_probabilities)) == 1  # the ripple: still jammed
+    assert 0.0 < after[-1].precision_loss_m < before.precision_loss_m
+
+    other.reset_after_maintenance(0, reset_precision_loss=False, reset_fatigue_damage=True)
+    kept = (other.process(result.motor[cut:]) + other.finish())[0]
+    assert kept.precision_loss_m == before.precision_loss_m
+    assert kept.fatigue_damage == kept.fatigue_damage_std == 0.0

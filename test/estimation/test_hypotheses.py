@@ -19,7 +19,7 @@ from prsm_health.estimation.hypotheses import (
     safe_sqrt,
 )
 from prsm_health.estimation.inputs import Block
-from prsm_health.estimation.measurement import LOAD, TorqueModel
+from prsm_health.estimation.measurement import LOAD, RIPPLE_COS, TorqueModel
 from prsm_health.estimation.params import EstimatorParams, Fidelity, ModelParams
 from prsm_health.physics.presets import load_preset
 
@@ -145,6 +145,36 @@ def test_random_blocks_keep_covariances_spd_and_probabilities_normalised(kind: s
             correlation = kf.P / np.outer(scale, scale)  # unit-free: states are N, N/s^2, ...
             assert np.linalg.eigvalsh(correlation).min() > 0.0
             np.linalg.cholesky(kf.P)
+
+
+@pytest.mark.parametrize("prune", [True, False])
+def test_a_maintenance_reset_makes_a_count_certain_and_keeps_the_load(prune: bool) -> None:
+    """reset_count: the given count for certain (with pruning off every count stays, at zero
+    probability), the likeliest hypothesis' load states, the ripple back to its prior."""
+    p = EstimatorParams(
+        actuator=Actuator(preset=PRESET),
+        model=ModelParams(radial_load_ratio=0.15, jam_rate_per_h=3600.0),
+        fidelity=Fidelity(prune_hypotheses=prune),
+    )
+    bank = JamHypotheses(p, TorqueModel(p))
+    rng = np.random.default_rng(3)
+    for torque in (2.0, 6.0, 6.5, 9.0):
+        bank.step(moving_block(torque, rng), jerk_psd=5e12)
+    best = bank.most_likely().filter
+    load, load_cov = best.x[:RIPPLE_COS].copy(), best.P[:RIPPLE_COS, :RIPPLE_COS].copy()
+    bank.reset_count(2)
+    probabilities = bank.probabilities()
+    assert probabilities[2] == 1.0 and probabilities.sum() == 1.0
+    assert len(bank.hypotheses) == (1 if prune else 11)
+    assert all(not h.fresh and h.ripple_axis is None for h in bank.hypotheses)
+    for h in bank.hypotheses:
+        np.testing.assert_array_equal(h.filter.x[:RIPPLE_COS], load)
+        np.testing.assert_array_equal(h.filter.P[:RIPPLE_COS, :RIPPLE_COS], load_cov)
+        np.testing.assert_array_equal(h.filter.x[RIPPLE_COS:], 0.0)
+        np.testing.assert_array_equal(h.filter.P[:RIPPLE_COS, RIPPLE_COS:], 0.0)
+        np.testing.assert_array_equal(
+            np.diagonal(h.filter.P)[RIPPLE_COS:], p.model.ripple_prior_std**2
+        )
 
 
 def test_safe_sqrt_repairs_a_matrix_that_lost_definiteness() -> None:

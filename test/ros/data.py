@@ -30,6 +30,13 @@ SCREW_RPM = 300.0
 ORIGIN_S = 1000.0
 
 
+def worn_params(tmp: Path) -> Path:
+    """Parameters whose wear is a million times faster, so that seconds show a loss."""
+    path = tmp / "params.yaml"
+    path.write_text("actuator: {preset: dong2022-downhole, wear_acceleration: 1.0e6}\n")
+    return path
+
+
 def synthetic_run(
     duration_s: float,
     *,

@@ -14,18 +14,11 @@ from prsm_health.estimation.params import load_params, params_from_mapping
 from prsm_health.outputs import PERSISTENCE, health_estimate_fields
 from prsm_health.ros.parameters import default_params_file
 from prsm_health.ros.persistence import StateStore
-from test.ros.data import ORIGIN_S, synthetic_run, write_bag
+from test.ros.data import ORIGIN_S, synthetic_run, worn_params, write_bag
 from test.ros.harness import Listener, NodeProcess, play, start_player, stop_process
 
 SAVE_PERIOD_S = 0.5
 HARDWARE_ID = "persist"
-
-
-def worn_params(tmp: Path) -> Path:
-    """Parameters whose wear is a million times faster, so that seconds show a loss."""
-    path = tmp / "params.yaml"
-    path.write_text("actuator: {preset: dong2022-downhole, wear_acceleration: 1.0e6}\n")
-    return path
 
 
 def restored(params_file: Path, state_file: Path) -> HealthEstimator:

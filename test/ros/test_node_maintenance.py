@@ -1,0 +1,100 @@
+"""The maintenance reset over the node's service, with real processes: a jam identified live
+is reset to the count the maintenance leaves, the precision loss to zero, the state saved at
+once; what cannot be reset is refused with the reason."""
+
+from __future__ import annotations
+
+import json
+from pathlib import Path
+
+import pytest
+from prsm_health_msgs.srv import ResetAfterMaintenance
+
+from test.ros.data import ORIGIN_S, synthetic_run, worn_params, write_bag
+from test.ros.harness import Listener, NodeProcess, play
+
+SERVICE = "reset_after_maintenance"
+
+
+def request(jammed: int, *, precision_loss: bool = False, note: str = "") -> object:
+    return ResetAfterMaintenance.Request(
+        jammed_rollers=jammed,
+        reset_precision_loss=precision_loss,
+        reset_fatigue_damage=False,
+        note=note,
+    )
+
+
+@pytest.mark.timeout(120)
+def test_a_reset_after_maintenance_over_the_service(ros: None, tmp_path: Path) -> None:
+    state_file = tmp_path / "state.json"
+    jam = write_bag(tmp_path / "jam", synthetic_run(4.0, jam_at_s=ORIGIN_S + 2.0))
+    later = ORIGIN_S + 6.0
+    healthy = write_bag(tmp_path / "healthy", synthetic_run(2.0, start_s=later, from_rest=False))
+    listener = Listener("maintained")
+    try:
+        with NodeProcess(
+            tmp_path,
+            "maintained",
+            params_file=str(worn_params(tmp_path)),
+            hardware_id="maintained",
+            state_file=str(state_file),
+            save_period_s=3600.0,  # only the reset saves during the test
+        ) as node:
+            node.wait_log("configured")
+            listener.wait_matched()
+            play(jam, listener=listener)
+            listener.wait_for(
+                lambda: bool(listener.health) and listener.health[-1]["stamp"] > ORIGIN_S + 3.9,
+                20.0,
+                "the estimates of the jam bag",
+            )
+            jammed = listener.health[-1]
+            assert jammed["jammed_rollers_most_likely"] == 1
+            assert jammed["precision_loss_um"] > 0.0 and jammed["fatigue_damage"] > 0.0
+
+            refused = listener.call(ResetAfterMaintenance, SERVICE, request(11))
+            assert not refused.success
+            assert refused.message.startswith("nothing reset: jammed_rollers: must be within 0..10")
+            assert not state_file.exists()
+
+            done = listener.call(
+                ResetAfterMaintenance, SERVICE, request(0, precision_loss=True, note="roller 3")
+            )
+            assert done.success, done.message
+            assert done.message == "reset after maintenance: jammed rollers 0, precision loss 0"
+            node.wait_log("(note: 'roller 3')")
+            saved = json.loads(state_file.read_text())["estimator"]  # saved at once
+            assert [h["count"] for h in saved["hypotheses"]] == [0]
+            assert saved["degradation"]["precision_loss_m"] == 0.0
+            assert saved["degradation"]["fatigue_damage"] == pytest.approx(
+                jammed["fatigue_damage"], rel=0.05
+            )
+
+            before = len(listener.health)
+            play(healthy, listener=listener)
+            listener.wait_for(
+                lambda: bool(listener.health) and listener.health[-1]["stamp"] > later + 1.9,
+                20.0,
+                "the estimates of the healthy bag",
+            )
+            after = listener.health[before:]
+            assert all(h["jammed_rollers_most_likely"] == 0 for h in after)
+            assert 0.0 < after[-1]["precision_loss_um"] < jammed["precision_loss_um"]
+            assert after[-1]["fatigue_damage"] > jammed["fatigue_damage"]
+
+        with NodeProcess(
+            tmp_path, "unconfigured", autostart=False, state_file=str(tmp_path / "other.json")
+        ) as node:
+            node.wait_log("autostart is false")
+            idle = Listener("unconfigured")
+            try:
+                response = idle.call(ResetAfterMaintenance, SERVICE, request(0), timeout_s=3.0)
+            except AssertionError as exc:  # no service before configure: the call cannot start
+                assert f"no service {SERVICE}" in str(exc)
+            else:
+                assert not response.success
+            finally:
+                idle.close()
+    finally:
+        listener.close()
