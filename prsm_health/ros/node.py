@@ -424,9 +424,8 @@ class HealthNode(LifecycleNode):
         (:meth:`HealthEstimator.reset_after_maintenance`) and the state saved at once."""
         try:
             estimator, config = self._estimator, self._config
-            if estimator is None or config is None:
-                response.success, response.message = False, "not configured: nothing to reset"
-                return response
+            if estimator is None or config is None:  # the service exists only while configured
+                raise RuntimeError("the node is not configured")
             self._on_batch()
             before = estimator.reset_after_maintenance(
                 request.jammed_rollers,

@@ -87,14 +87,10 @@ def test_a_reset_after_maintenance_over_the_service(ros: None, tmp_path: Path) -
             tmp_path, "unconfigured", autostart=False, state_file=str(tmp_path / "other.json")
         ) as node:
             node.wait_log("autostart is false")
-            idle = Listener("unconfigured")
-            try:
-                response = idle.call(ResetAfterMaintenance, SERVICE, request(0), timeout_s=3.0)
-            except AssertionError as exc:  # no service before configure: the call cannot start
-                assert f"no service {SERVICE}" in str(exc)
-            else:
-                assert not response.success
+            client = listener.node.create_client(ResetAfterMaintenance, f"/unconfigured/{SERVICE}")
+            try:  # the service exists from configure to cleanup
+                assert not client.wait_for_service(timeout_sec=2.0)
             finally:
-                idle.close()
+                listener.node.destroy_client(client)
     finally:
         listener.close()
