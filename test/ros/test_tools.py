@@ -12,12 +12,15 @@ import pytest
 from prsm_health_msgs.msg import MotorState
 from rclpy.qos import QoSProfile, QoSReliabilityPolicy
 
-from prsm_health.outputs import Level
+from prsm_health.outputs import INPUT_HEALTH, Level
 from prsm_health.ros.messages import stamp_seconds
 from prsm_health.ros.monitor import table
 from prsm_health.ros.player import ACK_TIMEOUT_S
 from test.ros.data import short_jam_scene, simulated_bag, synthetic_run, write_bag
 from test.ros.harness import Listener, NodeProcess, start_player, stop_process
+
+#: The node of the acknowledgement test (its diagnostics say what it received).
+HARDWARE_ID = "ack_test"
 
 
 def cli(*args: str, timeout_s: float = 60.0) -> subprocess.CompletedProcess[str]:
@@ -82,20 +85,30 @@ def test_play_names_what_a_reliable_subscriber_did_not_acknowledge(
     ros: None, tmp_path: Path
 ) -> None:
     """A node subscribing reliably is frozen (SIGSTOP) while the bag plays: its DDS threads
-    acknowledge nothing more, so the player waits ACK_TIMEOUT_S, names the topic, exits 1."""
+    acknowledge nothing more, so the player waits ACK_TIMEOUT_S, names the topic, exits 1.
+
+    The node is frozen once its diagnostics say it has received the player's messages: frozen
+    earlier, it might not match the player at all (the player then owes it nothing and exits
+    0; seen in CI when a publisher of an earlier test still counted on the graph)."""
     bag = write_bag(tmp_path / "bag", synthetic_run(3.0))
-    graph = Listener()  # sees the node's subscription and the player's publisher
+    graph = Listener()
+
+    def received() -> int:
+        inputs = graph.statuses(HARDWARE_ID).get(INPUT_HEALTH)
+        return int(inputs["values"]["received"]) if inputs else 0
+
     try:
-        with NodeProcess(tmp_path, input_qos="reliable", input_queue_depth=10_000) as node:
-            graph.wait_for(
-                lambda: graph.node.count_subscribers("/motor_state") >= 1, 30.0, "the node"
-            )
+        with NodeProcess(
+            tmp_path,
+            hardware_id=HARDWARE_ID,
+            input_qos="reliable",
+            input_queue_depth=10_000,
+            diagnostics_rate_hz=20.0,
+        ) as node:
+            graph.wait_for(lambda: bool(graph.statuses(HARDWARE_ID)), 30.0, "the node")
             player = start_player(bag, "--rate", "1")
             try:
-                graph.wait_for(
-                    lambda: graph.node.count_publishers("/motor_state") >= 1, 30.0, "the player"
-                )
-                graph.spin(1.5)  # the player matches the node, settles, and plays
+                graph.wait_for(lambda: received() >= 100, 30.0, "the node receiving the bag")
                 node.process.send_signal(signal.SIGSTOP)
                 out, _ = player.communicate(timeout=60)
             finally:
