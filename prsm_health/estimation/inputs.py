@@ -159,19 +159,18 @@ class SampleBlocker:
         ok, resets = self._advance_time(samples.stamp_s, ok)
         blocks: list[Block] = []
         begin = 0
+        every = bool(ok.all())  # the common case: nothing to select
         for reset in [*resets, len(samples)]:
             part = samples[begin:reset]
-            accepted = part[ok[begin:reset]]
+            accepted = part if every else part[ok[begin:reset]]
+            # A copy: pending samples must not alias the caller's arrays.
+            accepted = MotorSamples.concatenate([self._pending, accepted])
             if reset < len(samples):  # the old time line ends here: close its blocks
-                blocks += self._blocks(
-                    MotorSamples.concatenate([self._pending, accepted]), final=True
-                )
+                blocks += self._blocks(accepted, final=True)
                 self._anchor = None
                 self._time_reset = True
             else:
-                blocks += self._blocks(
-                    MotorSamples.concatenate([self._pending, accepted]), final=False
-                )
+                blocks += self._blocks(accepted, final=False)
             begin = reset
         return blocks
 
@@ -191,24 +190,26 @@ class SampleBlocker:
             & np.isfinite(samples.speed_rad_s)
             & np.isfinite(samples.position_rad)
         )
-        with np.errstate(invalid="ignore"):
-            in_range = (np.abs(samples.current_a) <= self._max_current) & (
-                np.abs(samples.speed_rad_s) <= self._max_speed
-            )
-        self._count(RejectReason.NON_FINITE, np.asarray(~finite))
-        self._count(RejectReason.OUT_OF_RANGE, np.asarray(finite & ~in_range))
-        return np.asarray(finite & in_range)
+        # A NaN compares False (numpy emits no warning for comparisons).
+        in_range = (np.abs(samples.current_a) <= self._max_current) & (
+            np.abs(samples.speed_rad_s) <= self._max_speed
+        )
+        ok = np.asarray(finite & in_range)
+        if not ok.all():
+            self._count(RejectReason.NON_FINITE, np.asarray(~finite))
+            self._count(RejectReason.OUT_OF_RANGE, np.asarray(finite & ~in_range))
+        return ok
 
     def _advance_time(self, stamps: FloatArray, ok: BoolArray) -> tuple[BoolArray, list[int]]:
         """Reject stamps that do not advance; follow a jumped-back time line after a while.
 
         Returns the accepted mask and the sample indices where a new time line starts.
         """
-        index = np.flatnonzero(ok)
+        index = np.arange(len(ok)) if ok.all() else np.flatnonzero(ok)
         if len(index) == 0:
             return ok, []
         t = stamps[index]
-        if t[0] > self._last_stamp and bool(np.all(np.diff(t) > 0.0)):
+        if t[0] > self._last_stamp and (len(t) == 1 or bool(np.all(np.diff(t) > 0.0))):
             self._last_stamp = float(t[-1])
             self._backwards_since = None
             return ok, []
