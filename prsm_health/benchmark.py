@@ -446,8 +446,8 @@ class JamOnset:
     category: str
     delay_s: float | None
     cycle_s: float | None
-    ripple_after: float = 1.0
-    ripple_turn_deg: float | None = None
+    ripple_after: float
+    ripple_turn_deg: float | None
 
     @property
     def within_cycle(self) -> bool:
