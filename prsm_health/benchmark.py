@@ -90,6 +90,8 @@ JAM_MARGIN_S = 25.0
 #: A jam onset counts as steady motion above this fraction of its stroke's largest load.
 STEADY_LOAD_FRACTION = 0.5
 ONSET_CATEGORIES = ("steady motion", "stroke end/low load", "standstill")
+#: A ripple phasor smaller than this (units of one roller's) counts as cancelled.
+RIPPLE_CANCELLED = 1e-9
 FloatArray = NDArray[np.float64]
 
 
@@ -450,6 +452,11 @@ class JamOnset:
     ripple_turn_deg: float | None
 
     @property
+    def ripple_cancelled(self) -> bool:
+        """The jammed rollers' ripples cancel after the onset (a roller opposite a jammed one)."""
+        return self.ripple_after < RIPPLE_CANCELLED
+
+    @property
     def within_cycle(self) -> bool:
         """Identified within one motion cycle of its onset."""
         return (
@@ -596,10 +603,6 @@ def onset_category(truth: TruthSamples, onset_s: float, moving_speed_rad_s: floa
     return "stroke end/low load"
 
 
-#: A ripple phasor smaller than this (units of one roller's) counts as cancelled.
-RIPPLE_CANCELLED = 1e-9
-
-
 def ripple_phasor(jammed: NDArray[np.bool_]) -> complex:
     """The first carrier harmonic of the jammed rollers' sliding torque, in units of one
     roller's: roller i (from 0) sits at the position angle theta + 2 pi i / N (000 eq. 8), so
@@ -626,11 +629,10 @@ def jam_onsets(
     moving = MOVING_FRACTION * params.actuator.preset.largest_speed_rpm * RPM_TO_RAD_S
     onsets = []
     for jam in run.metrics.jams:
-        # The onset is the stamp of the truth's first sample with the new count.
-        after = min(int(np.searchsorted(truth.stamp_s, jam.onset_s)), len(truth) - 1)
+        # The onset is the stamp of the truth's first sample with the new count (never the first).
+        after = int(np.searchsorted(truth.stamp_s, jam.onset_s))
         ripple_after, turn = ripple_change(
-            ripple_phasor(truth.roller_jammed[max(after - 1, 0)]),
-            ripple_phasor(truth.roller_jammed[after]),
+            ripple_phasor(truth.roller_jammed[after - 1]), ripple_phasor(truth.roller_jammed[after])
         )
         onsets.append(
             JamOnset(

@@ -21,7 +21,6 @@ import numpy as np
 from prsm_health.benchmark import (
     BAG_SCENES,
     ONSET_CATEGORIES,
-    RIPPLE_CANCELLED,
     BenchResults,
     JamOnset,
     Run,
@@ -143,7 +142,7 @@ def _jam_floors(onsets: list[JamOnset]) -> list[Floor]:
         for count in sorted({o.count for o in found}):
             group = [o for o in found if o.count == count]
             hits = sum(o.within_cycle for o in group)
-            cancelled = sum(o.ripple_after < RIPPLE_CANCELLED for o in group)
+            cancelled = sum(o.ripple_cancelled for o in group)
             note = f" ({cancelled} with the ripple cancelled)" if cancelled else ""
             parts.append(f"jam {count}: {hits}/{len(group)}{note}")
         delays = [o.delay_s for o in found if o.delay_s is not None]
@@ -540,7 +539,7 @@ def _decode(results: BenchResults) -> list[str]:
 def _ripple(onset: JamOnset) -> str:
     """The jammed rollers' ripple after the onset, in units of one roller's, and how far the
     onset turned it (benchmark.ripple_change)."""
-    if onset.ripple_after < RIPPLE_CANCELLED:
+    if onset.ripple_cancelled:
         return "0 (cancelled)"
     if onset.ripple_turn_deg is None:
         return f"{onset.ripple_after:.2f} (new)"

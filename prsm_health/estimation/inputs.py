@@ -205,7 +205,7 @@ class SampleBlocker:
 
         Returns the accepted mask and the sample indices where a new time line starts.
         """
-        index = np.arange(len(ok)) if ok.all() else np.flatnonzero(ok)
+        index = np.flatnonzero(ok)
         if len(index) == 0:
             return ok, []
         t = stamps[index]

@@ -365,11 +365,11 @@ class HealthNode(LifecycleNode):
                 return
             samples, received = self._pending.take()
             states = estimator.process(samples) if len(samples) else []
-            self._took(estimator, config, states, received)
+            self._handle_estimates(estimator, config, states, received)
         except Exception as exc:
             self._fault("processing", exc)
 
-    def _took(
+    def _handle_estimates(
         self,
         estimator: HealthEstimator,
         config: NodeConfig,
@@ -432,15 +432,14 @@ class HealthNode(LifecycleNode):
                 reset_precision_loss=request.reset_precision_loss,
                 reset_fatigue_damage=request.reset_fatigue_damage,
             )
-            self._took(estimator, config, before, 0)
+            self._handle_estimates(estimator, config, before, 0)
             reset = [f"jammed rollers {request.jammed_rollers}"]
             reset += ["precision loss 0"] if request.reset_precision_loss else []
             reset += ["fatigue damage 0"] if request.reset_fatigue_damage else []
             response.success = True
             response.message = "reset after maintenance: " + ", ".join(reset)
             self.get_logger().info(f"{response.message} (note: {request.note!r})")
-            self._saved_at_samples = -1  # save now, even without new samples
-            self._save()
+            self._save(force=True)
         except ValueError as exc:
             response.success, response.message = False, f"nothing reset: {exc}"
         except Exception as exc:
@@ -454,13 +453,14 @@ class HealthNode(LifecycleNode):
         except Exception as exc:
             self._fault("save", exc)
 
-    def _save(self) -> None:
-        """Save the state if it changed since the last save (errors reported, not raised)."""
+    def _save(self, *, force: bool = False) -> None:
+        """Save the state if it changed since the last save, or ``force`` (errors reported,
+        not raised)."""
         estimator, store = self._estimator, self._store
         if estimator is None or store is None:
             return
         samples = estimator.counters.accepted + estimator.counters.rejected_total
-        if samples == self._saved_at_samples:
+        if samples == self._saved_at_samples and not force:
             return
         try:
             store.save(estimator)
