@@ -299,7 +299,7 @@ class HealthEstimator:
         return self._mean_nis() > self.params.filter.divergence_nis
 
     def _mean_nis(self) -> float:
-        return float(np.mean([value for _, value in self._nis])) if self._nis else math.nan
+        return sum(value for _, value in self._nis) / len(self._nis) if self._nis else math.nan
 
     def _state(
         self,

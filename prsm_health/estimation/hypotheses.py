@@ -176,15 +176,25 @@ def ripple_walk(
     radial load, and must not turn the phase on the way (a second jammed roller does turn it).
     Returns Q (2 x 2) and the axis (None while the phase has never been known).
     """
-    amplitude2 = float(ripple @ ripple)
+    c, s = float(ripple[0]), float(ripple[1])
+    amplitude2 = c * c + s * s
     if moving and amplitude2 > 0.0:
-        across = np.array([-ripple[1], ripple[0]])
-        if float(across @ covariance @ across) < phase_known_rad**2 * amplitude2**2:
-            axis = ripple / math.sqrt(amplitude2)
+        (pcc, pcs), (psc, pss) = covariance.tolist()
+        across_var = s * s * pcc - c * s * (pcs + psc) + c * c * pss
+        if across_var < phase_known_rad**2 * amplitude2**2:
+            axis = np.array([c, s]) / math.sqrt(amplitude2)
+    along2 = along_per_sqrt_s**2 * dt
     if axis is None:
-        return np.eye(2) * (along_per_sqrt_s**2 * dt), None
-    outer = np.outer(axis, axis)
-    return dt * (along_per_sqrt_s**2 * outer + across_per_sqrt_s**2 * (np.eye(2) - outer)), axis
+        return np.array([[along2, 0.0], [0.0, along2]]), None
+    # dt (along^2 u u' + across^2 (I - u u')) = across2 I + (along2 - across2) u u'
+    across2 = across_per_sqrt_s**2 * dt
+    ux, uy = axis.tolist()
+    extra = along2 - across2
+    off_diagonal = extra * ux * uy
+    walk = np.array(
+        [[across2 + extra * ux * ux, off_diagonal], [off_diagonal, across2 + extra * uy * uy]]
+    )
+    return walk, axis
 
 
 @dataclass
@@ -239,6 +249,7 @@ class JamHypotheses:
         if self._ripple:
             self._jump_cov[RIPPLE_COS:, RIPPLE_COS:] = np.eye(2) * params.model.ripple_prior_std**2
         self._spare_filters: list[Filter] = []
+        self._predicted: dict[tuple[bytes, int], Prediction] = {}
         self._process_cache: tuple[object, tuple[FloatArray, FloatArray]] = (
             None,
             (initial, initial),
@@ -419,6 +430,7 @@ class JamHypotheses:
         nis: list[float] = []
         log_likelihood: list[float] = []
         priors: list[Prediction] = []
+        self._predicted = {}
         z = np.array([block.motor_torque_nm])
         for h in self.hypotheses:
             kf = h.filter
@@ -455,7 +467,7 @@ class JamHypotheses:
             # The outputs weigh each prediction by its probability: for a negligible one the
             # prediction before the update serves (it saves a model evaluation per block).
             significant = h.log_prob > NEGLIGIBLE_LOG_PROBABILITY and not gated
-            predictions.append(self._model.predict(kf.x, block, h.count) if significant else prior)
+            predictions.append(self._predict(kf.x, block, h.count) if significant else prior)
         return StepResult(predictions=predictions, nis=nis, gated=gated)
 
     def _ekf_update(
@@ -506,7 +518,7 @@ class JamHypotheses:
         moved by -D / 2 and the variance grows by D^2 / 12. Without this, the block in which
         a jam starts would be explained by the new hypothesis' ripple states and corrupt them.
         """
-        prediction = self._model.predict(x, block, jammed)
+        prediction = self._predict(x, block, jammed)
         if not fresh:
             return (
                 prediction,
@@ -514,7 +526,7 @@ class JamHypotheses:
                 prediction.jacobian,
                 prediction.variance_nm2,
             )
-        before = self._model.predict(x, block, jammed - 1)
+        before = self._predict(x, block, jammed - 1)
         step = prediction.motor_torque_nm - before.motor_torque_nm
         return (
             prediction,
@@ -522,6 +534,16 @@ class JamHypotheses:
             0.5 * (prediction.jacobian + before.jacobian),
             prediction.variance_nm2 + step**2 / 12.0,
         )
+
+    def _predict(self, x: FloatArray, block: Block, jammed: int) -> Prediction:
+        """The model's prediction, computed once per state and count in a block: a fresh
+        hypothesis predicts from its parent's state, and its jam starting inside the block
+        needs the parent's count's prediction there too (:meth:`_measurement`)."""
+        key = (x.tobytes(), jammed)
+        prediction = self._predicted.get(key)
+        if prediction is None:
+            prediction = self._predicted[key] = self._model.predict(x, block, jammed)
+        return prediction
 
     def _hx(self, block: Block, jammed: int, fresh: bool) -> Any:
         def hx(x: FloatArray) -> FloatArray:
@@ -532,12 +554,12 @@ class JamHypotheses:
     def _safe_covariance(self, p: FloatArray) -> FloatArray:
         """Symmetric, variances at least the floor, correlation matrix positive definite."""
         p = 0.5 * (p + p.T)
-        diagonal = np.diagonal(p)
-        if np.any(diagonal < self._floor):
+        diagonal = p.diagonal()
+        if (diagonal < self._floor).any():
             p = p + np.diag(np.maximum(self._floor - diagonal, 0.0))
-        scale = np.sqrt(np.diagonal(p))
-        root, info = dpotrf(p / np.outer(scale, scale), lower=1, clean=0)
-        if info != 0 or float(np.diagonal(root).min()) ** 2 < CORRELATION_FLOOR:
+        scale = np.sqrt(p.diagonal())
+        root, info = dpotrf(p / (scale[:, None] * scale), lower=1, clean=0)
+        if info != 0 or float(root.diagonal().min()) ** 2 < CORRELATION_FLOOR:
             p = repair_covariance(p, self._floor)
         return p
 

@@ -124,7 +124,8 @@ class TorqueModel:
         load = float(x[LOAD])
         direction = block.direction
         case = self._actuator.loading_case(block.motor_speed_rad_s)
-        value, slope = self._models[case].evaluate(load)
+        # Python floats: the arithmetic below is scalar, where numpy's scalars are slow.
+        value, slope = (array.tolist() for array in self._models[case].evaluate(load))
         healthy = self.n_rollers - jammed
         screw_speed = abs(block.motor_speed_rad_s) / self._gear_ratio
         jacobian = np.zeros(self.dim)

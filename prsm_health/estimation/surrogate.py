@@ -145,7 +145,7 @@ class AveragedTables:
             return zeros, zeros
         x = math.log(load)
         grid = self.log_load
-        index = min(max(int(np.searchsorted(grid, x)) - 1, 0), len(grid) - 2)
+        index = min(max(int(grid.searchsorted(x)) - 1, 0), len(grid) - 2)
         slope = self.slopes[:, index]
         value = np.exp(self.log_values[:, index] + slope * (x - grid[index]))
         return value, value * slope / load
