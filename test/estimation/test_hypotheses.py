@@ -292,6 +292,22 @@ def test_a_ripple_of_known_phase_walks_along_its_phasor_only() -> None:
     np.testing.assert_allclose(q, q.T)
 
 
+def test_the_phase_is_judged_across_the_phasor_with_its_correlations() -> None:
+    """A covariance long along the phasor (std 0.7, the amplitude unknown) and narrow across
+    it (std 0.05, phase std 0.1 rad): the phase is known, though each of c and s alone has a
+    standard deviation above the amplitude. The same variances without the correlation leave
+    the phase unknown."""
+    ripple = np.array([0.3, 0.4])
+    u, v = np.array([0.6, 0.8]), np.array([-0.8, 0.6])
+    correlated = 0.7**2 * np.outer(u, u) + 0.05**2 * np.outer(v, v)
+    _, axis = ripple_walk(ripple, correlated, None, moving=True, dt=0.04, **WALK)
+    assert axis is not None
+    np.testing.assert_allclose(axis, u)
+    uncorrelated = np.diag(np.diagonal(correlated))
+    _, none = ripple_walk(ripple, uncorrelated, None, moving=True, dt=0.04, **WALK)
+    assert none is None
+
+
 def test_the_ripple_axis_is_kept_when_the_amplitude_shrinks_and_not_set_at_standstill() -> None:
     """A phasor that shrinks towards zero (the wall's radial load falls) no longer has a known
     phase, but keeps its axis: it cannot turn by passing through zero. At standstill the
