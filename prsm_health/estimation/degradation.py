@@ -88,6 +88,15 @@ class DegradationIntegrator:
         """No motion: the rate is zero (nothing is integrated at standstill)."""
         self.state.rate_m_per_s = 0.0
 
+    def reset(self, *, precision_loss: bool, fatigue_damage: bool) -> None:
+        """Parts replaced: the precision loss (with its error terms) and/or the fatigue damage
+        (with its error) start again from zero."""
+        s = self.state
+        if precision_loss:
+            s.precision_loss_m = s.load_error_m = s.jam_error_m = s.radial_error_m = 0.0
+        if fatigue_damage:
+            s.fatigue_damage = s.fatigue_error = 0.0
+
     @property
     def precision_loss_std_m(self) -> float:
         """Standard deviation of the accumulated precision loss."""

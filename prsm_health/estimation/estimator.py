@@ -11,7 +11,6 @@ docs/estimation.md explains the model, what is observable and each option.
 
 from __future__ import annotations
 
-import dataclasses
 import hashlib
 import math
 from collections import deque
@@ -193,14 +192,9 @@ class HealthEstimator:
             )
         before = self.finish()
         self._bank.reset_count(jammed_rollers)
-        state = self._degradation.state
-        if reset_precision_loss:
-            state = dataclasses.replace(
-                state, precision_loss_m=0.0, load_error_m=0.0, jam_error_m=0.0, radial_error_m=0.0
-            )
-        if reset_fatigue_damage:
-            state = dataclasses.replace(state, fatigue_damage=0.0, fatigue_error=0.0)
-        self._degradation.state = state
+        self._degradation.reset(
+            precision_loss=reset_precision_loss, fatigue_damage=reset_fatigue_damage
+        )
         return before
 
     def process(self, samples: MotorSamples) -> list[HealthState]:

@@ -275,10 +275,15 @@ class JamHypotheses:
         if self._ripple:
             ripple = slice(RIPPLE_COS, RIPPLE_SIN + 1)
             x[ripple] = 0.0
-            p[ripple, :] = 0.0
-            p[:, ripple] = 0.0
-            p[ripple, ripple] = np.diag(self._initial_var[ripple])
+            self._forget(p, ripple)
         self._start(count, x, p)
+
+    def _forget(self, p: FloatArray, states: slice) -> None:
+        """Put ``states`` of the covariance ``p`` (in place) back at their initial variances,
+        uncorrelated with the other states."""
+        p[states, :] = 0.0
+        p[:, states] = 0.0
+        p[states, states] = np.diag(self._initial_var[states])
 
     # --- filters ------------------------------------------------------------------------
     def _new_filter(self, x: FloatArray, p: FloatArray) -> Filter:
@@ -601,18 +606,14 @@ class JamHypotheses:
         reset or a divergence; after a hole in the data, where the load may have moved on).
         A forgotten load keeps its mean as the start of its re-acquisition, unless that lies
         beyond DIVERGED_LOAD_RATIO of the rated load: then it starts from zero."""
-        forget = range(LOAD + 1 if keep_load else LOAD, LOAD_STATES)
+        forget = slice(LOAD_RATE if keep_load else LOAD, LOAD_STATES)
         diverged = DIVERGED_LOAD_RATIO * self._params.rated_load_n
         for h in self.hypotheses:
             x, p = h.filter.x.copy(), h.filter.P.copy()
             if not keep_load and abs(float(x[LOAD])) > diverged:
                 x[LOAD] = 0.0
-            for i in forget:
-                if i != LOAD:
-                    x[i] = 0.0
-                p[i, :] = 0.0
-                p[:, i] = 0.0
-                p[i, i] = self._initial_var[i]
+            x[LOAD_RATE:LOAD_STATES] = 0.0
+            self._forget(p, forget)
             h.filter.x, h.filter.P = x, p
 
     def most_likely(self) -> Hypothesis:
