@@ -20,6 +20,7 @@ import numpy as np
 
 from prsm_health.benchmark import (
     BAG_SCENES,
+    CONFIGURATION_NAMES,
     ONSET_CATEGORIES,
     BenchResults,
     JamOnset,
@@ -649,63 +650,70 @@ def markdown(results: BenchResults, found: list[Floor]) -> str:
 
 
 # --- pareto.png -------------------------------------------------------------------------------
-#: Points of the Pareto plot closer than this on both log axes share one label [decades].
-LABEL_GROUP_DECADES = 0.08
+#: Marker shapes of the Pareto plot, one per configuration (with a colour of its own).
+MARKERS = "osD^v<>phX*"
 
 
-def label_groups(
-    points: list[tuple[float, float, str]],
-) -> list[list[tuple[float, float, str]]]:
-    """The points (x, y, name) in groups that share one label: each joins the first group
-    whose first point is within LABEL_GROUP_DECADES of it on both log axes (points that
-    nearly coincide would otherwise print their names over each other)."""
-    groups: list[list[tuple[float, float, str]]] = []
-    for point in points:
-        for group in groups:
-            x, y, _ = group[0]
-            if (
-                abs(math.log10(point[0] / x)) <= LABEL_GROUP_DECADES
-                and abs(math.log10(point[1] / y)) <= LABEL_GROUP_DECADES
-            ):
-                group.append(point)
-                break
-        else:
-            groups.append([point])
-    return groups
+def configuration_styles(names: Iterable[str]) -> dict[str, tuple[str, str]]:
+    """(colour, marker) per configuration name, in CONFIGURATION_NAMES' order and fixed by
+    its place there (names it lacks follow, alphabetically): the same in both panels and in
+    every run, and different for every configuration, so that points which nearly coincide
+    (default and no-skip-standstill do) are told apart in the legend instead of by labels
+    printed over each other."""
+    wanted = set(names)
+    rank = {name: i for i, name in enumerate(CONFIGURATION_NAMES)}
+    for name in sorted(wanted - rank.keys()):
+        rank[name] = len(rank)
+    return {
+        name: (f"C{rank[name] % 10}", MARKERS[rank[name] % len(MARKERS)])
+        for name in sorted(wanted, key=rank.__getitem__)
+    }
+
+
+#: A panel of the Pareto plot: its title and its points (mean us per sample, RMSE %, config).
+Panel = tuple[str, list[tuple[float, float, str]]]
 
 
 def pareto(results: BenchResults, path: Path) -> None:
     """Mean cost per sample (log x) against load RMSE, one point per configuration: on the
     full runs, and on the naive excerpt (where every configuration ran)."""
+    titles = {
+        "full": "full runs: scenes every configuration ran",
+        "excerpt": f"first {results.plan['naive_seconds']:g} s of "
+        f"{len(results.plan['naive_scenes'])} bags (naive too)",
+    }
+    panels = [
+        (
+            title,
+            [
+                (pooled_timing(runs).mean_us, pooled_rmse_percent(runs), config)
+                for config, runs in by_config.items()
+            ],
+        )
+        for kind, title in titles.items()
+        if (by_config := common_runs(results, kind))
+    ]
+    plot_pareto(panels, f"Estimator configurations: time against error ({results.mode} run)", path)
+
+
+def plot_pareto(panels: list[Panel], title: str, path: Path) -> None:
+    """Draw the panels side by side on log axes, one legend for the configurations."""
     import matplotlib  # only when plotting: the CLI starts without it
 
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
+    from matplotlib.lines import Line2D
     from matplotlib.ticker import FuncFormatter, NullFormatter
 
-    panels = [
-        ("full", "full runs: scenes every configuration ran"),
-        (
-            "excerpt",
-            f"first {results.plan['naive_seconds']:g} s of "
-            f"{len(results.plan['naive_scenes'])} bags (naive too)",
-        ),
-    ]
-    plotted = [(title, runs) for kind, title in panels if (runs := common_runs(results, kind))]
-    figure, axes = plt.subplots(1, len(plotted), figsize=(5.0 * len(plotted), 4.5), squeeze=False)
-    for axis, (title, by_config) in zip(axes[0], plotted, strict=True):
-        points = sorted(
-            (pooled_timing(runs).mean_us, pooled_rmse_percent(runs), config)
-            for config, runs in by_config.items()
-        )
+    styles = configuration_styles(name for _, points in panels for _, _, name in points)
+    width_in = 4.6 * len(panels) + 1.6  # the legend's column included
+    figure, axes = plt.subplots(1, len(panels), figsize=(width_in, 4.5), squeeze=False)
+    for axis, (panel_title, points) in zip(axes[0], panels, strict=True):
         axis.set_xscale("log")
         axis.set_yscale("log")
-        axis.scatter([p[0] for p in points], [p[1] for p in points])
-        for i, group in enumerate(label_groups(points)):  # alternate sides between groups
-            x, y, _ = group[0]
-            label = "\n".join(name for _, _, name in group)
-            offset = (5, 4) if i % 2 == 0 else (5, -4 - 8 * len(group))
-            axis.annotate(label, (x, y), textcoords="offset points", xytext=offset, fontsize=7)
+        for x, y, name in points:  # hollow markers: coinciding points show both shapes
+            colour, marker = styles[name]
+            axis.scatter([x], [y], marker=marker, s=48, facecolors="none", edgecolors=colour)
         for scale, values in (
             (axis.xaxis, [p[0] for p in points]),
             (axis.yaxis, [p[1] for p in points]),
@@ -715,12 +723,17 @@ def pareto(results: BenchResults, path: Path) -> None:
             scale.set_view_interval(10.0**low, 10.0 ** max(high, low + 1))
             scale.set_major_formatter(FuncFormatter(lambda value, _: f"{value:g}"))
             scale.set_minor_formatter(NullFormatter())
-        axis.set_title(title, fontsize=9)
+        axis.set_title(panel_title, fontsize=9)
         axis.set_xlabel("mean cost per sample [us], one process call per sample")
         axis.grid(True, which="both", alpha=0.3)
     axes[0][0].set_ylabel("load RMSE while moving [% of 55 kN]")
-    figure.suptitle(f"Estimator configurations: time against error ({results.mode} run)")
-    figure.tight_layout()
+    handles = [
+        Line2D([], [], linestyle="", marker=marker, color=colour, fillstyle="none", label=name)
+        for name, (colour, marker) in styles.items()
+    ]
+    figure.legend(handles=handles, loc="center right", fontsize=8, title="configuration")
+    figure.suptitle(title)
+    figure.tight_layout(rect=(0.0, 0.0, 1.0 - 1.5 / width_in, 1.0))
     figure.savefig(path, dpi=100)
     plt.close(figure)
 

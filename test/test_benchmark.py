@@ -18,6 +18,7 @@ import numpy as np
 import pytest
 
 from prsm_health.benchmark import (
+    CONFIGURATION_NAMES,
     CONFIGURATIONS,
     BenchResults,
     BenchScene,
@@ -37,8 +38,8 @@ from prsm_health.benchmark import (
 from prsm_health.benchmark_report import (
     FILES,
     RMSE_PERCENT,
+    configuration_styles,
     floors,
-    label_groups,
     pooled_rmse_percent,
     write_results,
 )
@@ -313,8 +314,10 @@ def test_cli_refuses_unknown_configurations(capsys: pytest.CaptureFixture[str]) 
     assert "unknown fast" in capsys.readouterr().err
 
 
-def test_nearly_coinciding_pareto_points_share_a_label() -> None:
-    points = [(33.7, 4.77, "default"), (33.5, 4.77, "no-skip-standstill"), (38.6, 4.75, "no-merge")]
-    points += [(64.6, 4.76, "no-prune"), (44.8, 13.2, "ukf")]
-    names = [[name for _, _, name in group] for group in label_groups(points)]
-    assert names == [["default", "no-skip-standstill", "no-merge"], ["no-prune"], ["ukf"]]
+def test_every_configuration_has_its_own_pareto_style() -> None:
+    """Points that nearly coincide (default and no-skip-standstill) are told apart by colour
+    and marker in the legend, so no two configurations may share both."""
+    styles = configuration_styles([*reversed(CONFIGURATION_NAMES), "default", "extra"])
+    assert list(styles) == [*CONFIGURATION_NAMES, "extra"]
+    assert len(set(styles.values())) == len(styles)
+    assert configuration_styles(["ukf", "default"])["ukf"] == styles["ukf"]
