@@ -17,6 +17,9 @@ the simulator's truth with :func:`~prsm_health.estimation.metrics.score`:
   first ``naive_seconds`` of a few bags, where every configuration runs as well for a
   consistent comparison.
 
+Every run with a jam also runs in the default configuration told the true jam count at each
+onset (:func:`told_count`): the load error left once the count is right, beside the run's own.
+
 Time per sample is measured the way the node feeds samples: one ``process`` call per sample,
 each call timed (``timing_samples`` samples from the start of each run); the chunked
 throughput comes from the replay (bags) or chunked ``process`` calls (generated runs). The
@@ -478,6 +481,26 @@ class WearRun:
 
 
 @dataclass(frozen=True)
+class ToldCountRun:
+    """The default configuration on a run with jams, told the true count at each onset
+    (:func:`told_count`). Beside the same run's default estimates it splits the load error into
+    what the count's identification costs and what remains with the right count.
+
+    metrics: :func:`score` against the truth. largest_load_n: as :class:`Run`'s.
+    """
+
+    scene: str
+    group: str
+    metrics: Metrics
+    largest_load_n: float
+
+    @property
+    def rmse_percent_largest(self) -> float:
+        """Load RMSE while moving, % of the largest paper load."""
+        return 100.0 * self.metrics.load_rmse_n / self.largest_load_n
+
+
+@dataclass(frozen=True)
 class BenchResults:
     """Everything one benchmark run measured."""
 
@@ -489,6 +512,7 @@ class BenchResults:
     jam_onsets: list[JamOnset]
     wear_true_factor: WearRun | None
     wear_prior: list[WearRun]
+    told_count: list[ToldCountRun]
     elapsed_s: float
 
     def runs_of(self, *, kind: str = "full", config: str | None = None) -> list[Run]:
@@ -567,6 +591,30 @@ def chunked(params: EstimatorParams, samples: MotorSamples) -> tuple[list[Health
     start = time.perf_counter()
     states += estimator.finish()
     return states, elapsed + time.perf_counter() - start
+
+
+def told_count(
+    params: EstimatorParams, samples: MotorSamples, truth: TruthSamples
+) -> list[HealthState]:
+    """The estimates of ``samples`` fed as :func:`chunked` does, with the estimator told the
+    true jam count at each of the truth's onsets (:meth:`HealthEstimator.reset_after_maintenance`
+    at the first sample from the onset on; precision loss and fatigue damage kept): what the
+    load filter achieves once the count is right, whatever the count's identification does."""
+    counts = truth.jammed_rollers
+    onsets = np.flatnonzero(np.diff(counts) > 0) + 1
+    ends = [*np.searchsorted(samples.stamp_s, truth.stamp_s[onsets]).tolist(), len(samples)]
+    estimator = HealthEstimator(params)
+    states: list[HealthState] = []
+    begin = 0
+    for i, end in enumerate(ends):
+        for start in range(begin, end, CHUNK_SAMPLES):
+            states += estimator.process(samples[start : min(start + CHUNK_SAMPLES, end)])
+        if i < len(onsets):
+            states += estimator.reset_after_maintenance(
+                int(counts[onsets[i]]), reset_precision_loss=False, reset_fatigue_damage=False
+            )
+        begin = end
+    return states + estimator.finish()
 
 
 def scored(states: list[HealthState], truth: TruthSamples, params: EstimatorParams) -> Metrics:
@@ -661,6 +709,7 @@ class _Bench:
         self.configs = [c for c in plan.configs if c.name not in self.skipped]
         self.runs: list[Run] = []
         self.onsets: list[JamOnset] = []
+        self.told: list[ToldCountRun] = []
 
     def _full_run(
         self,
@@ -690,6 +739,14 @@ class _Bench:
         durations, states = one_at_a_time(params, samples, keep=True)
         return _run(scene, config, "excerpt", params, len(samples), states, truth, durations)
 
+    def _told_count_run(
+        self, scene: BenchScene, samples: MotorSamples, truth: TruthSamples
+    ) -> ToldCountRun:
+        params = params_for(scene.scene, Fidelity())
+        metrics = scored(told_count(params, samples, truth), truth, params)
+        largest = params.actuator.preset.largest_axial_load_n
+        return ToldCountRun(scene.name, scene.group, metrics, largest)
+
     def _data(self, scene: BenchScene) -> tuple[MotorSamples, TruthSamples, float | None]:
         """The scene's samples and truth (read or simulated) and its decode baseline."""
         if scene.bag is None:
@@ -707,6 +764,11 @@ class _Bench:
                 begin = time.perf_counter()
                 self.runs.append(self._full_run(scene, config, samples, truth, decode))
                 self.progress(f"{scene.name} x {config.name}: {time.perf_counter() - begin:.1f} s")
+        ran_default = scene.runs("default") and any(c.name == "default" for c in self.configs)
+        if ran_default and np.any(np.diff(truth.jammed_rollers) > 0):
+            begin = time.perf_counter()
+            self.told.append(self._told_count_run(scene, samples, truth))
+            self.progress(f"{scene.name} told the count: {time.perf_counter() - begin:.1f} s")
         if scene.name in self.plan.naive_scenes:
             excerpt = min(round(self.plan.naive_seconds * scene.scene.rate_hz), len(samples))
             cut = truth_until(truth, float(samples.stamp_s[excerpt - 1]))
@@ -844,5 +906,6 @@ def run_benchmark(plan: Plan, *, progress: Callable[[str], None] = LOG.info) -> 
         jam_onsets=bench.onsets,
         wear_true_factor=true_factor,
         wear_prior=prior,
+        told_count=bench.told,
         elapsed_s=time.perf_counter() - started,
     )
