@@ -3,10 +3,14 @@
 from __future__ import annotations
 
 import math
+import re
+from pathlib import Path
 
 import pytest
+import yaml
 from builtin_interfaces.msg import Time
 from prsm_health_msgs.msg import MotorState
+from prsm_health_msgs.srv import ResetAfterMaintenance
 from sensor_msgs.msg import JointState
 from std_msgs.msg import Header
 
@@ -19,6 +23,7 @@ from prsm_health.ros.messages import (
     stamp_seconds,
     time_msg,
 )
+from prsm_health.ros.parameters import NODE_NAME
 
 
 def test_stamps() -> None:
@@ -60,3 +65,20 @@ def test_output_messages() -> None:
     assert array.status[0].level == bytes([1])
     assert (array.status[0].name, array.status[0].hardware_id) == ("prsm_health: fatigue", "left")
     assert [(kv.key, kv.value) for kv in array.status[0].values] == [("a", "1")]
+
+
+def test_the_readme_service_example_is_a_valid_request() -> None:
+    """README's `ros2 service call` (no ros2 CLI here, so it cannot run as written): the
+    service path is the node's, the type is ours, and the YAML sets every request field with
+    values of the right types (the generated constructor and setters, with check_fields,
+    refuse anything else)."""
+    readme = (Path(__file__).parents[2] / "README.md").read_text()
+    found = re.search(r"ros2 service call (\S+) (\S+) \\\n\s*\"(\{.*\})\"", readme)
+    assert found, "README: no ros2 service call example"
+    path, type_name, values = found.groups()
+    assert path == f"/{NODE_NAME}/reset_after_maintenance"
+    assert type_name == "prsm_health_msgs/srv/ResetAfterMaintenance"
+    fields = yaml.safe_load(values)
+    assert set(fields) == set(ResetAfterMaintenance.Request.get_fields_and_field_types())
+    request = ResetAfterMaintenance.Request(check_fields=True, **fields)  # Jazzy: opt-in
+    assert [getattr(request, name) for name in fields] == list(fields.values())
