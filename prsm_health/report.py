@@ -2,8 +2,8 @@
 
 ``prsm-health replay BAG --report DIR`` writes ``load.png`` (axial load with +-2 std and the
 truth), ``jams.png`` (probability of each jam count over time, the true count on top),
-``precision_loss.png`` (estimate +-2 std and the truth) and ``index.html`` (the three plots
-and the metrics). matplotlib's Agg backend: no display needed.
+``precision_loss.png`` (estimate +-2 std, cut at zero, and the truth) and ``index.html`` (the
+three plots and the metrics). matplotlib's Agg backend: no display needed.
 """
 
 from __future__ import annotations
@@ -50,8 +50,20 @@ def _series(states: list[HealthState]) -> _Series:
     )
 
 
-def _band(axis: Axes, t: FloatArray, mean: FloatArray, std: FloatArray, label: str) -> None:
-    axis.fill_between(t, mean - 2 * std, mean + 2 * std, alpha=0.3, label=f"{label} +-2 std")
+def _band(
+    axis: Axes,
+    t: FloatArray,
+    mean: FloatArray,
+    std: FloatArray,
+    label: str,
+    *,
+    non_negative: bool = False,
+) -> None:
+    """The estimate and its +-2 std band; a quantity that cannot be negative (precision loss)
+    has the band cut at zero, and says so."""
+    low = np.maximum(mean - 2 * std, 0.0) if non_negative else mean - 2 * std
+    band = f"{label} +-2 std" + (", cut at 0" if non_negative else "")
+    axis.fill_between(t, low, mean + 2 * std, alpha=0.3, label=band)
     axis.plot(t, mean, lw=1.0, label=label)
 
 
@@ -93,7 +105,7 @@ def write_report(
     figures.append(figure)
 
     figure, axis = plt.subplots(figsize=(10, 4))
-    _band(axis, t, series.loss_um, series.loss_std_um, "estimate")
+    _band(axis, t, series.loss_um, series.loss_std_um, "estimate", non_negative=True)
     if truth is not None:
         axis.plot(truth.stamp_s, truth.precision_loss_m * UM_PER_M, "k--", lw=0.8, label="truth")
     axis.set(xlabel="time [s]", ylabel="precision loss [µm]", title=f"{title}: precision loss")

@@ -19,6 +19,7 @@ from prsm_health.bags.typestore import typestore
 from prsm_health.cli import main
 from prsm_health.estimation.params import EstimatorParams
 from prsm_health.replay import replay
+from prsm_health.report import _band, plt
 from prsm_health.scenes.recording import record
 from prsm_health.scenes.scene import scene_from_mapping
 from prsm_health.scenes.simulator import Simulator
@@ -153,3 +154,17 @@ def test_params_with_another_block_size_still_replay(bag: Path) -> None:
     fine = dataclasses.replace(p, filter=dataclasses.replace(p.filter, block_duration_s=0.02))
     result = replay(bag, fine)
     assert result.metrics is not None and result.metrics.load_rmse_percent_rated < 2.0
+
+
+def test_the_precision_loss_band_is_cut_at_zero() -> None:
+    """A +-2 std band below zero would show a negative precision loss; the load's may."""
+    figure, axis = plt.subplots()
+    t, mean, std = np.array([0.0, 1.0]), np.array([1.0, 2.0]), np.array([1.0, 0.5])
+    _band(axis, t, mean, std, "loss", non_negative=True)
+    _band(axis, t, -mean, std, "load")
+    loss, load = (c.get_paths()[0].vertices[:, 1] for c in axis.collections)
+    labels = axis.get_legend_handles_labels()[1]
+    plt.close(figure)
+    assert loss.min() == 0.0 and loss.max() == 3.0  # -1 uncut
+    assert load.min() == -3.0
+    assert labels == ["loss +-2 std, cut at 0", "loss", "load +-2 std", "load"]
