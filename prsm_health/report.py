@@ -18,7 +18,9 @@ import matplotlib
 matplotlib.use("Agg")
 import matplotlib.pyplot as plt
 import numpy as np
+from matplotlib.artist import Artist
 from matplotlib.axes import Axes
+from matplotlib.ticker import MaxNLocator
 from numpy.typing import NDArray
 
 from prsm_health.estimation.estimate import UM_PER_M, HealthState
@@ -94,14 +96,20 @@ def write_report(
     figure, axis = plt.subplots(figsize=(10, 4))
     counts = series.jams.shape[1]
     shown = [k for k in range(counts) if series.jams[:, k].max() > 1e-3]
-    axis.stackplot(t, series.jams[:, shown].T, labels=[f"P({k} jammed)" for k in shown])
+    handles: list[Artist] = list(
+        axis.stackplot(t, series.jams[:, shown].T, labels=[f"P({k} jammed)" for k in shown])
+    )
     if truth is not None:
         axis2 = axis.twinx()
-        axis2.step(truth.stamp_s, truth.jammed_rollers, "k--", lw=0.8, where="post")
+        handles += axis2.step(
+            truth.stamp_s, truth.jammed_rollers, "k--", lw=0.8, where="post", label="true count"
+        )
         axis2.set_ylabel("true jammed rollers")
         axis2.set_ylim(-0.1, max(2, int(truth.jammed_rollers.max()) + 1))
+        axis2.yaxis.set_major_locator(MaxNLocator(integer=True))
     axis.set(xlabel="time [s]", ylabel="probability", ylim=(0, 1), title=f"{title}: jams")
-    axis.legend(loc="center left")
+    # Below the axes: inside, it would cover the probabilities it names.
+    axis.legend(handles=handles, loc="upper center", bbox_to_anchor=(0.5, -0.15), ncols=6)
     figures.append(figure)
 
     figure, axis = plt.subplots(figsize=(10, 4))
