@@ -23,7 +23,7 @@ from prsm_health.estimation.estimate import EstimateEvent, HealthState
 from prsm_health.estimation.hypotheses import DIVERGED_LOAD_RATIO, JamHypotheses, StepResult
 from prsm_health.estimation.inputs import Block, InputCounters, SampleBlocker, merge_blocks
 from prsm_health.estimation.measurement import LOAD, TorqueModel
-from prsm_health.estimation.params import EstimatorParams
+from prsm_health.estimation.params import MIN_BLOCKS_FOR_DIVERGENCE, EstimatorParams
 from prsm_health.estimation.surrogate import physics_averages
 from prsm_health.physics.friction import efficiency
 from prsm_health.physics.load_distribution import radial_capacity_ratio
@@ -32,8 +32,6 @@ from prsm_health.signals import MotorSamples
 #: Consecutive gated blocks after which the load is re-initialised (a lasting change that no
 #: hypothesis explains, e.g. a load step far beyond the load model).
 GATED_BLOCKS_BEFORE_RESET = 5
-#: The NIS divergence test needs at least this many blocks in its window.
-MIN_BLOCKS_FOR_DIVERGENCE = 10
 #: A block whose first sample comes more than this many block periods after the previous
 #: block's last one follows a hole in the data (dropouts, rejected samples): the load may
 #: have moved on unseen.

@@ -27,6 +27,14 @@ from prsm_health.physics.errors import ParameterError
 from prsm_health.physics.geometry import require
 from prsm_health.yamlio import YamlError, load_yaml_mapping
 
+#: The NIS divergence test needs at least this many blocks in its window
+#: (``filter.divergence_window_s``).
+MIN_BLOCKS_FOR_DIVERGENCE = 10
+#: A rated load set in the diagnostics must lie within this factor of the preset's largest
+#: paper load either way (the filter's scales and its divergence bound follow it: 55 meant as
+#: kN instead of N would make every block "diverged").
+RATED_LOAD_FACTOR = 10.0
+
 
 def _require_ranges(obj: object, prefix: str, ranges: dict[str, tuple[float, float]]) -> None:
     """Every named field is a finite number inside its closed range [low, high]."""
@@ -147,8 +155,12 @@ class FilterParams:
 
     block_duration_s: samples are averaged over blocks of this duration (one filter update
     each). standstill_speed_rad_s: motor speed below which a block is standstill.
-    max_gap_s: a longer gap between accepted samples, or time going backwards for longer than
-    time_reset_after_s, re-initialises the load (event TIME_RESET). gate_nis: a block whose
+    max_gap_s: a longer gap between accepted samples starts a new block grid (the block after
+    it is never merged into a standstill), and one block integrates wear and fatigue over at
+    most this long. time_reset_after_s: time going backwards is rejected until the
+    jumped-back clock has advanced this long on its own; then it is followed and the load
+    re-initialised (event TIME_RESET). (A silence of more than estimator.HOLE_BLOCKS blocks
+    keeps the load but forgets its derivatives.) gate_nis: a block whose
     normalised innovation squared exceeds it in every active hypothesis is rejected as an
     outlier. divergence_nis: mean NIS over divergence_window_s above it means the filter is
     inconsistent; the load is re-initialised (event DIVERGENCE_RECOVERED).
@@ -183,7 +195,7 @@ class FilterParams:
                 "block_duration_s": (1e-4, 10.0),
                 "standstill_speed_rad_s": (0.0, 1e3),
                 "max_gap_s": (1e-3, 1e6),
-                "time_reset_after_s": (0.0, 1e3),
+                "time_reset_after_s": (1e-3, 1e3),
                 "gate_nis": (1.0, 1e6),
                 "divergence_nis": (1.0, 1e6),
                 "divergence_window_s": (1e-3, 1e4),
@@ -192,6 +204,19 @@ class FilterParams:
                 "merge_distance_sigmas": (0.0, 1e3),
                 "max_speed_rad_s": (0.0, 1e5),
             },
+        )
+        require(
+            self.max_gap_s >= self.block_duration_s,
+            "filter.max_gap_s",
+            f"must be at least filter.block_duration_s ({self.block_duration_s:g} s), got "
+            f"{self.max_gap_s:g} (a block's wear and fatigue are integrated over at most it)",
+        )
+        shortest = MIN_BLOCKS_FOR_DIVERGENCE * self.block_duration_s
+        require(
+            self.divergence_window_s >= shortest,
+            "filter.divergence_window_s",
+            f"must hold at least {MIN_BLOCKS_FOR_DIVERGENCE} blocks ({shortest:g} s), got "
+            f"{self.divergence_window_s:g} (a shorter window never judges divergence)",
         )
         require(
             isinstance(self.components_per_count, int)
@@ -246,7 +271,8 @@ class Fidelity:
 class DiagnosticThresholds:
     """Levels of the diagnostics (OK / WARN / ERROR) and input health limits.
 
-    rated_load_n: 0 means the preset's largest paper load. load_warn/error_fraction: of the
+    rated_load_n: 0 means the preset's largest paper load; else within RATED_LOAD_FACTOR of it
+    (the filter's scales follow it too). load_warn/error_fraction: of the
     rated load. jam_warn_probability: P(at least one jammed roller) that raises WARN; a most
     likely count >= 1 is ERROR. precision_loss_budget_um: the allowed loss; warn/error
     fractions of it. fatigue_warn/error_damage: Miner damage levels. stale_timeout_s: inputs
@@ -315,6 +341,13 @@ class EstimatorParams:
             self.model.initial_jammed_rollers <= n_rollers,
             "model.initial_jammed_rollers",
             f"must be <= n_rollers = {n_rollers}",
+        )
+        rated, largest = self.diagnostics.rated_load_n, self.actuator.preset.largest_axial_load_n
+        require(
+            rated == 0.0 or largest / RATED_LOAD_FACTOR <= rated <= largest * RATED_LOAD_FACTOR,
+            "diagnostics.rated_load_n",
+            f"must be 0 (the preset's largest load, {largest:g} N) or within "
+            f"{RATED_LOAD_FACTOR:g}x of it, in N; got {rated:g}",
         )
 
     @property

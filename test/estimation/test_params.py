@@ -79,11 +79,42 @@ def test_no_radial_load_and_aligned_drops_the_ripple_states() -> None:
             },
             "diagnostics.load_warn_fraction",
         ),
+        # A repeated stamp would be a new time line at once.
+        (
+            {"actuator": {"preset": "dong2022-downhole"}, "filter": {"time_reset_after_s": 0}},
+            "filter.time_reset_after_s",
+        ),
+        # A block's wear would be cut to the gap limit.
+        (
+            {"actuator": {"preset": "dong2022-downhole"}, "filter": {"max_gap_s": 0.01}},
+            "filter.max_gap_s",
+        ),
+        # Ten blocks never fit: the divergence test would never run.
+        (
+            {"actuator": {"preset": "dong2022-downhole"}, "filter": {"divergence_window_s": 0.2}},
+            "filter.divergence_window_s",
+        ),
+        # kN for N: every block beyond ten times 55 N would be "diverged".
+        (
+            {"actuator": {"preset": "dong2022-downhole"}, "diagnostics": {"rated_load_n": 55}},
+            "diagnostics.rated_load_n",
+        ),
     ],
 )
 def test_invalid_documents_name_the_field(document: dict[str, object], field: str) -> None:
     with pytest.raises(ParameterError, match=field.replace(".", r"\.")):
         params_from_mapping(document)
+
+
+def test_parameters_at_their_cross_checked_limits_are_accepted() -> None:
+    params = params_from_mapping(
+        {
+            "actuator": {"preset": "dong2022-downhole"},
+            "filter": {"block_duration_s": 0.05, "max_gap_s": 0.05, "divergence_window_s": 0.5},
+            "diagnostics": {"rated_load_n": 5500.0},
+        }
+    )
+    assert params.rated_load_n == 5500.0
 
 
 def test_load_params_reads_yaml_and_names_an_unreadable_file(tmp_path: Path) -> None:
