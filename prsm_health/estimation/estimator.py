@@ -179,17 +179,21 @@ class HealthEstimator:
         damage.
 
         Raises:
-            ValueError: ``jammed_rollers`` outside 0..N (N: the preset's rollers); nothing is
-                done then.
+            ValueError: ``jammed_rollers`` not an integer within 0..N (N: the preset's
+                rollers); nothing is done then.
         """
         rollers = self._bank.n_rollers
-        if not 0 <= jammed_rollers <= rollers:
+        count = jammed_rollers
+        whole = isinstance(count, int | np.integer) and not isinstance(count, bool)
+        if not (whole and 0 <= count <= rollers):
             raise ValueError(
-                f"jammed_rollers: must be within 0..{rollers} (the rollers of "
-                f"{self.params.actuator.preset.name}), got {jammed_rollers}"
+                f"jammed_rollers: must be an integer within 0..{rollers} (the rollers of "
+                f"{self.params.actuator.preset.name}), got {jammed_rollers!r}"
             )
         before = self.finish()
-        self._bank.reset_count(jammed_rollers)
+        self._bank.reset_count(int(jammed_rollers))
+        self._nis.clear()  # the consistency before the maintenance says nothing about after
+        self._gated_run = 0
         self._degradation.reset(
             precision_loss=reset_precision_loss, fatigue_damage=reset_fatigue_damage
         )

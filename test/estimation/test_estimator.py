@@ -205,11 +205,13 @@ def test_maintenance_resets_the_count_and_only_what_was_replaced() -> None:
     assert before.precision_loss_m > 0.0 and before.fatigue_damage > 0.0
     other = HealthEstimator(params)
     other.restore(estimator.snapshot())
-    for bad in (-1, 11):
-        expected = rf"jammed_rollers: must be within 0\.\.10 .*got {bad}"
+    for bad in (-1, 11, 1.0, True):  # a float or bool count would break the bank later
+        expected = rf"jammed_rollers: must be an integer within 0\.\.10 .*got {bad!r}"
         with pytest.raises(ValueError, match=expected):
             estimator.reset_after_maintenance(
-                bad, reset_precision_loss=True, reset_fatigue_damage=True
+                bad,  # type: ignore[arg-type]
+                reset_precision_loss=True,
+                reset_fatigue_damage=True,
             )
 
     pending = estimator.reset_after_maintenance(

@@ -55,7 +55,8 @@ def test_a_reset_after_maintenance_over_the_service(ros: None, tmp_path: Path) -
 
             refused = listener.call(ResetAfterMaintenance, SERVICE, request(11))
             assert not refused.success
-            assert refused.message.startswith("nothing reset: jammed_rollers: must be within 0..10")
+            refusal = "nothing reset: jammed_rollers: must be an integer within 0..10"
+            assert refused.message.startswith(refusal)
             assert not state_file.exists()
 
             done = listener.call(
