@@ -42,6 +42,10 @@ REACQUIRE_S = 0.25
 
 #: Version of the :meth:`HealthEstimator.snapshot` layout.
 SNAPSHOT_FORMAT = 2
+#: A restored state's means and covariances must stay below this in magnitude. No state the
+#: filter reaches comes near it (predictions are capped at one second); a larger one is a
+#: damaged file, and it would overflow once symmetrised.
+SNAPSHOT_LARGEST_VALUE = 1e100
 
 
 class SnapshotError(ValueError):
@@ -83,6 +87,7 @@ class HealthEstimator:
         self._blind_until_s = -math.inf
         self._direction = 0
         self._direction_since_s = -math.inf
+        self._resumed = False
 
     @property
     def counters(self) -> InputCounters:
@@ -105,7 +110,8 @@ class HealthEstimator:
                 {
                     "count": h.count,
                     "fresh": h.fresh,
-                    "log_probability": h.log_prob,
+                    # JSON has no -inf: None is a count ruled out (unpruned banks keep them).
+                    "log_probability": h.log_prob if math.isfinite(h.log_prob) else None,
                     "x": h.filter.x.tolist(),
                     "P": h.filter.P.tolist(),
                     "ripple_axis": None if h.ripple_axis is None else h.ripple_axis.tolist(),
@@ -118,7 +124,8 @@ class HealthEstimator:
         }
 
     def restore(self, snapshot: dict[str, Any]) -> None:
-        """Resume from :meth:`snapshot`; raises SnapshotError if it does not fit."""
+        """Resume from :meth:`snapshot`; raises SnapshotError if it does not fit (nothing is
+        changed then). The first block after it follows a hole of unknown length."""
         try:
             if snapshot["format"] != SNAPSHOT_FORMAT:
                 raise SnapshotError(f"format {snapshot['format']!r}, expected {SNAPSHOT_FORMAT}")
@@ -133,7 +140,8 @@ class HealthEstimator:
                 k = int(entry["count"])
                 x = np.asarray(entry["x"], dtype=np.float64)
                 p = np.asarray(entry["P"], dtype=np.float64)
-                log_probability = float(entry["log_probability"])
+                saved = entry["log_probability"]
+                log_probability = -math.inf if saved is None else float(saved)
                 # Optional: a state saved before the ripple axis existed learns it again.
                 axis = entry.get("ripple_axis")
                 if axis is not None:
@@ -144,9 +152,9 @@ class HealthEstimator:
                     0 <= k <= self._bank.n_rollers
                     and x.shape == (dim,)
                     and p.shape == (dim, dim)
-                    and np.all(np.isfinite(x))
-                    and np.all(np.isfinite(p))
-                    and log_probability <= 0.0
+                    and np.all(np.abs(x) < SNAPSHOT_LARGEST_VALUE)  # NaN fails too
+                    and np.all(np.abs(p) < SNAPSHOT_LARGEST_VALUE)
+                    and (saved is None or -math.inf < log_probability <= 0.0)
                 )
                 if not valid:
                     raise SnapshotError(f"hypothesis {k} is malformed")
@@ -156,12 +164,20 @@ class HealthEstimator:
             rejected = [int(v) for v in snapshot["samples_rejected"]]
         except (KeyError, TypeError, ValueError, AttributeError) as exc:
             raise SnapshotError(f"malformed state: {exc!r}") from exc
-        if not states or not all(math.isfinite(v) for v in degradation.to_dict().values()):
-            raise SnapshotError("no hypotheses, or non-finite degradation values")
+        if not any(math.isfinite(state[4]) for state in states):
+            raise SnapshotError("no hypothesis with a probability above zero")
+        if not all(math.isfinite(v) for v in degradation.to_dict().values()):
+            raise SnapshotError("non-finite degradation values")
+        if len(rejected) != len(self.counters.rejected) or accepted < 0 or min(rejected) < 0:
+            raise SnapshotError(
+                f"sample counters: {len(self.counters.rejected)} rejection reasons expected, "
+                f"got {len(rejected)}, or a negative count"
+            )
         self._bank.restore(states)
         self._degradation.state = degradation
         self.counters.accepted = accepted
         self.counters.rejected = rejected
+        self._resumed = True
 
     def reset_after_maintenance(
         self, jammed_rollers: int, *, reset_precision_loss: bool, reset_fatigue_damage: bool
@@ -235,7 +251,13 @@ class HealthEstimator:
             self._bank.reinitialise_load()
             self._nis.clear()
             event = EstimateEvent.TIME_RESET
-        hole = block.silence_before_s > HOLE_BLOCKS * self.params.filter.block_duration_s
+        # After a restore the time since the saved state is unknown (the input stage's clock is
+        # not saved): the first block follows a hole of unknown length.
+        hole = (
+            self._resumed
+            or block.silence_before_s > HOLE_BLOCKS * self.params.filter.block_duration_s
+        )
+        self._resumed = False
         if hole and not block.time_reset:
             self._bank.reinitialise_load(keep_load=True)
         if block.time_reset or hole:

@@ -2,14 +2,16 @@
 
 from __future__ import annotations
 
+import dataclasses
 import json
+import math
 
 import numpy as np
 import pytest
 
 from prsm_health.actuator import Actuator
 from prsm_health.estimation.estimator import HealthEstimator, SnapshotError
-from prsm_health.estimation.params import EstimatorParams
+from prsm_health.estimation.params import EstimatorParams, Fidelity
 from prsm_health.physics.presets import load_preset
 from prsm_health.signals import MotorSamples
 
@@ -69,6 +71,14 @@ def test_a_state_of_another_actuator_is_refused() -> None:
         lambda s: s["degradation"].update(precision_loss_m="a lot"),
         lambda s: s.update(format=99),
         lambda s: s["hypotheses"][0].update(ripple_axis=[0.0, 2.0]),
+        # Parsed by json.loads; the probabilities would all become NaN.
+        lambda s: [h.update(log_probability=float("-inf")) for h in s["hypotheses"]],
+        lambda s: [h.update(log_probability=None) for h in s["hypotheses"]],
+        # Finite, but it overflows once symmetrised.
+        lambda s: s["hypotheses"][0].update(P=[[1e308] * 5] * 5),
+        # Fewer rejection reasons (an older file): the counters would fail at the next one.
+        lambda s: s.update(samples_rejected=[0, 0, 0]),
+        lambda s: s.update(samples_accepted=-1),
     ],
 )
 def test_a_malformed_state_is_refused(damage: object) -> None:
@@ -76,3 +86,40 @@ def test_a_malformed_state_is_refused(damage: object) -> None:
     damage(saved)  # type: ignore[operator]
     with pytest.raises(SnapshotError):
         HealthEstimator(params()).restore(saved)
+
+
+def test_an_unpruned_bank_with_ruled_out_counts_is_saved_and_restored() -> None:
+    """Without pruning the impossible counts stay at probability zero (log -inf, which JSON
+    cannot hold): saved as null, restored as zero."""
+    unpruned = dataclasses.replace(params(), fidelity=Fidelity(prune_hypotheses=False))
+    first = HealthEstimator(unpruned)
+    first.process(moving(1.0))
+    first.reset_after_maintenance(0, reset_precision_loss=False, reset_fatigue_damage=False)
+    text = json.dumps(first.snapshot(), allow_nan=False)  # the node's StateStore writes so
+    resumed = HealthEstimator(unpruned)
+    resumed.restore(json.loads(text))
+    zero = [h.count for h in first._bank.hypotheses if h.log_prob == -math.inf]
+    assert zero and [h.count for h in resumed._bank.hypotheses] == [
+        h.count for h in first._bank.hypotheses
+    ]
+    assert [h.count for h in resumed._bank.hypotheses if h.log_prob == -math.inf] == zero
+
+
+def test_a_load_that_moved_while_the_node_was_down_is_not_taken_for_a_jam() -> None:
+    """The input stage's clock is not saved, so the first block after a restore follows a
+    hole of unknown length: the load's derivatives are forgotten and jam evidence waits while
+    the load is found again, as the original does after the same silence. Without that, the
+    restored estimator predicts 40 ms from the saved state, and a load 50 % larger after the
+    restart is a torque step that only a jam explains."""
+    first = HealthEstimator(params())
+    first.process(moving(3.0))
+    first.finish()
+    resumed = HealthEstimator(params())
+    resumed.restore(first.snapshot())
+    later = moving(1.0, start_s=13.0)
+    later = MotorSamples(
+        later.stamp_s, 1.5 * later.current_a, later.speed_rad_s, later.position_rad
+    )
+    for states in (first.process(later), resumed.process(later)):
+        assert max(1.0 - s.jam_probabilities[0] for s in states) < 1e-6
+        assert states[-1].axial_load_n == pytest.approx(1.5 * 25_000.0, rel=0.1)
