@@ -144,6 +144,7 @@ class HealthNode(LifecycleNode):
         self._reset_service: Any = None
         self._subscription: Any = None
         self._timers: list[Any] = []
+        self.finalized = False  # shut down (rclpy refuses a second shutdown transition)
         self._reset_run_state()
 
     # --- parameters ---------------------------------------------------------------------
@@ -162,20 +163,21 @@ class HealthNode(LifecycleNode):
         return errors
 
     def _on_set_parameters(self, parameters: list[Parameter]) -> SetParametersResult:
-        for parameter in parameters:
-            spec = SPECS.get(parameter.name)
-            if spec is None:
-                continue
+        ours = [p for p in parameters if p.name in SPECS]
+        for parameter in ours:
             if self._config is not None:
                 return SetParametersResult(
                     successful=False,
                     reason=f"parameter {parameter.name} is applied at configure: deactivate"
                     " and clean up the node first",
                 )
-            if problem := spec.problem(parameter.value):
+            if problem := SPECS[parameter.name].problem(parameter.value):
                 return SetParametersResult(
                     successful=False, reason=f"parameter {parameter.name}: {problem}"
                 )
+        # Only once the whole (possibly atomic) set is accepted: a refused set keeps the
+        # errors of the values ROS refused at start for configure to report.
+        for parameter in ours:
             self._declare_errors.pop(parameter.name, None)
         return SetParametersResult(successful=True)
 
@@ -198,6 +200,11 @@ class HealthNode(LifecycleNode):
             self.get_logger().error(f"configure failed: {exc}")
             return TransitionCallbackReturn.FAILURE
         try:
+            topic = self.resolve_topic_name(config.input_topic)
+        except Exception as exc:  # the expanded name is checked by rcl only
+            self.get_logger().error(f"configure failed: parameter input_topic: {exc}")
+            return TransitionCallbackReturn.FAILURE
+        try:
             self._configure(config)
         except Exception as exc:
             self.get_logger().error(f"configure failed: {exc!r}")
@@ -205,7 +212,7 @@ class HealthNode(LifecycleNode):
             return TransitionCallbackReturn.FAILURE
         self.get_logger().info(
             f"configured: {config.hardware_id}, preset {config.estimator.actuator.preset.name},"
-            f" input {config.input_type} on {self.resolve_topic_name(config.input_topic)}"
+            f" input {config.input_type} on {topic}"
         )
         return TransitionCallbackReturn.SUCCESS
 
@@ -289,6 +296,7 @@ class HealthNode(LifecycleNode):
     def on_shutdown(self, state: LifecycleState) -> TransitionCallbackReturn:
         self._stop()
         self._release()
+        self.finalized = True
         return TransitionCallbackReturn.SUCCESS
 
     def on_error(self, state: LifecycleState) -> TransitionCallbackReturn:
@@ -439,7 +447,8 @@ class HealthNode(LifecycleNode):
             response.success = True
             response.message = "reset after maintenance: " + ", ".join(reset)
             self.get_logger().info(f"{response.message} (note: {request.note!r})")
-            self._save(force=True)
+            self._saved_at_samples = -1  # changed without new samples: a failed save is retried
+            self._save()
         except ValueError as exc:
             response.success, response.message = False, f"nothing reset: {exc}"
         except Exception as exc:
@@ -453,18 +462,18 @@ class HealthNode(LifecycleNode):
         except Exception as exc:
             self._fault("save", exc)
 
-    def _save(self, *, force: bool = False) -> None:
-        """Save the state if it changed since the last save, or ``force`` (errors reported,
-        not raised)."""
+    def _save(self) -> None:
+        """Save the state if samples came since the last successful save, or a reset cleared
+        ``_saved_at_samples`` (errors reported, not raised: the next call tries again)."""
         estimator, store = self._estimator, self._store
         if estimator is None or store is None:
             return
         samples = estimator.counters.accepted + estimator.counters.rejected_total
-        if samples == self._saved_at_samples and not force:
+        if samples == self._saved_at_samples:
             return
         try:
             store.save(estimator)
-        except OSError as exc:
+        except (OSError, ValueError) as exc:  # ValueError: a value JSON cannot hold
             self._persistence = dataclasses.replace(self._persistence, save_error=str(exc))
             self.get_logger().error(f"cannot save the state: {exc}", throttle_duration_sec=1.0)
             return
@@ -496,7 +505,8 @@ def main(argv: Sequence[str] | None = None) -> int:
             node.autostart()
             while not stop.is_set() and ok():
                 executor.spin_once(timeout_sec=SPIN_TIMEOUT_S)
-            node.trigger_shutdown()
+            if not node.finalized:  # a lifecycle shutdown may have come over its services
+                node.trigger_shutdown()
         finally:
             executor.shutdown()
             node.destroy_node()

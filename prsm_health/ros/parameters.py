@@ -19,6 +19,9 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Any, Literal
 
+from rclpy.exceptions import InvalidTopicNameException
+from rclpy.validate_topic_name import validate_topic_name
+
 from prsm_health.estimation.params import EstimatorParams, params_from_mapping
 from prsm_health.physics.errors import PhysicsError
 from prsm_health.ros.persistence import default_state_file
@@ -29,6 +32,9 @@ NODE_NAME = "prsm_health"
 #: The bundled estimator parameters (installed to share/prsm_health/config).
 DEFAULT_PARAMS = Path("config", "default.yaml")
 _HARDWARE_ID = re.compile(r"[A-Za-z0-9_.\-]+")
+#: A slower ~/health timer than this is refused (its period in ns would overflow rcl's int64
+#: near 1e-10 Hz; nobody wants one estimate a minute either).
+LOWEST_HEALTH_RATE_HZ = 0.01
 
 Value = bool | int | float | str
 
@@ -202,6 +208,16 @@ def node_config(values: Mapping[str, Any], errors: Mapping[str, str] | None = No
     hardware_id = str(values["hardware_id"])
     if "hardware_id" not in problems and not _HARDWARE_ID.fullmatch(hardware_id):
         problems["hardware_id"] = f"must match [A-Za-z0-9_.-]+, got {hardware_id!r}"
+    if "input_topic" not in problems and values["input_topic"]:
+        try:
+            validate_topic_name(values["input_topic"])
+        except InvalidTopicNameException as exc:
+            problems["input_topic"] = f"{str(exc).splitlines()[0]} {values['input_topic']!r}"
+    rate = values["health_rate_hz"]
+    if "health_rate_hz" not in problems and 0.0 < rate < LOWEST_HEALTH_RATE_HZ:
+        problems["health_rate_hz"] = (
+            f"must be 0 (every estimate) or at least {LOWEST_HEALTH_RATE_HZ:g}, got {rate!r}"
+        )
     if problems:
         raise ConfigError(problems)
 

@@ -5,9 +5,11 @@ from __future__ import annotations
 from pathlib import Path
 
 import pytest
+from rcl_interfaces.srv import SetParametersAtomically
+from rclpy.parameter import Parameter
 
 from prsm_health.outputs import INPUT_HEALTH
-from test.ros.harness import Listener, NodeProcess
+from test.ros.harness import Listener, NodeProcess, stop_process
 
 
 @pytest.mark.timeout(60)
@@ -30,7 +32,22 @@ def test_invalid_parameters_fail_configure_by_name(ros: None, tmp_path: Path) ->
             assert "parameter diagnostics_rate_hz" in log and "INTEGER" in log
             assert node.alive()
             assert listener.lifecycle_state() == "unconfigured"
+            # A refused atomic set changes nothing: health_rate_hz's error from the start
+            # (ROS kept the default) is still reported at the next configure.
+            atomic = SetParametersAtomically.Request(
+                parameters=[
+                    Parameter("health_rate_hz", value=0.0).to_parameter_msg(),
+                    Parameter("input_type", value="can_bus").to_parameter_msg(),
+                ]
+            )
+            service = "set_parameters_atomically"
+            assert not listener.call(SetParametersAtomically, service, atomic).result.successful
             assert not listener.transition("configure")  # still refused, nothing changed
+            listener.wait_for(
+                lambda: node.log().count("parameter health_rate_hz") == 2,
+                5.0,
+                "health_rate_hz named by the second configure",
+            )
 
             # Fixed through the lifecycle, without a restart.
             assert listener.set_parameter("health_rate_hz", 0.0) == (True, "")
@@ -90,5 +107,12 @@ def test_inactive_node_publishes_nothing(ros: None, tmp_path: Path) -> None:
             assert listener.transition("cleanup")
             assert listener.lifecycle_state() == "unconfigured"
             assert node.alive()
+
+            # Shut down over the lifecycle service; SIGINT then ends the process cleanly
+            # (rclpy raises on a second shutdown transition: exit code 1 and a traceback).
+            assert listener.transition("shutdown")
+            assert listener.lifecycle_state() == "finalized"
+            assert stop_process(node.process) == 0
+            assert "Traceback" not in node.log()
     finally:
         listener.close()

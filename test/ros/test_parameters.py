@@ -53,6 +53,18 @@ def test_every_bad_parameter_is_named() -> None:
     assert "parameter input_type: must be one of motor_state, joint_state" in message
 
 
+def test_a_bad_topic_name_and_a_health_rate_near_zero_are_named() -> None:
+    """Both passed their descriptors and then broke activate without naming the parameter
+    (rcl checks a topic name only when it is used; a period of 1/1e-12 s overflows int64)."""
+    with pytest.raises(ConfigError) as info:
+        node_config(values(input_topic="bad topic!", health_rate_hz=1e-12))
+    assert set(info.value.problems) == {"input_topic", "health_rate_hz"}
+    assert info.value.problems["input_topic"].startswith("Invalid topic name")
+    assert "'bad topic!'" in info.value.problems["input_topic"]
+    assert "must be 0 (every estimate) or at least 0.01" in info.value.problems["health_rate_hz"]
+    assert node_config(values(input_topic="~/in", health_rate_hz=0.01)).health_rate_hz == 0.01
+
+
 def test_errors_known_from_ros_are_reported() -> None:
     with pytest.raises(ConfigError, match="parameter diagnostics_rate_hz: refused"):
         node_config(values(), {"diagnostics_rate_hz": "refused by ROS"})
