@@ -309,7 +309,9 @@ def _inputs(inputs: InputHealth, th: DiagnosticThresholds, now_s: float) -> _Par
 
 
 def _recent(at_s: float | None, now_s: float) -> bool:
-    return at_s is not None and now_s - at_s <= RECENT_S
+    """Within RECENT_S before now; an event stamped after now (the clock went back, e.g. a
+    bag played in a loop with its clock) belongs to the old time line and is not recent."""
+    return at_s is not None and 0.0 <= now_s - at_s <= RECENT_S
 
 
 def _consistency(fields: Mapping[str, Any] | None, events: FilterEvents, now_s: float) -> _Part:
@@ -379,7 +381,8 @@ def persistence_status(
 ) -> DiagnosticStatusData:
     """The state file's status: ERROR when saving fails, WARN while an unusable file was kept
     aside at restore (until the node is cleaned up), else OK."""
-    age = now_s - health.last_save_s if health.last_save_s is not None else -1.0
+    # -1: never saved; a save stamped after now (the clock went back) is 0 s old.
+    age = max(now_s - health.last_save_s, 0.0) if health.last_save_s is not None else -1.0
     if health.save_error is not None:
         level, message = Level.ERROR, f"cannot save the state: {health.save_error}"
     elif health.kept_corrupt is not None:

@@ -220,7 +220,9 @@ class _Output:
         self._diagnostics.events.observe(now, states, counters)
         self._diagnostics.events.non_finite(now, replaced)
         self._latest = states[-1]
-        if self._next_diagnostics_s is None or now >= self._next_diagnostics_s:
+        due = self._next_diagnostics_s
+        # Due, or the bag's clock went back (the schedule belongs to the old time line).
+        if due is None or not due - DIAGNOSTICS_PERIOD_S <= now < due:
             self._write_diagnostics(now)
             self._next_diagnostics_s = now + DIAGNOSTICS_PERIOD_S
 

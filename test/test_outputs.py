@@ -178,6 +178,9 @@ def test_filter_consistency_reports_recent_problems() -> None:
     assert statuses(events=old)[FILTER_CONSISTENCY][0] == Level.OK
     error = FilterEvents(non_finite_outputs=2, last_error_s=NOW, last_error="non-finite")
     assert statuses(events=error)[FILTER_CONSISTENCY][0] == Level.ERROR
+    # Stamped after now: the clock went back (a looped bag with its clock), an old time line.
+    future = dataclasses.replace(error, last_error_s=NOW + 30.0)
+    assert statuses(events=future)[FILTER_CONSISTENCY][0] == Level.OK
 
 
 def test_every_status_is_stale_without_recent_input() -> None:
@@ -215,3 +218,7 @@ def test_persistence_status() -> None:
     assert ("kept_corrupt", "/s.json.corrupt-x") in status.values
     failing = PersistenceHealth(state_file="/s.json", save_error="disk full")
     assert persistence_status(failing, "left", NOW).level == Level.ERROR
+    saved = PersistenceHealth(state_file="/s.json", saves=1, last_save_s=NOW - 4.0)
+    assert ("last_save_age_s", "4") in persistence_status(saved, "left", NOW).values
+    later = dataclasses.replace(saved, last_save_s=NOW + 30.0)  # the clock went back
+    assert ("last_save_age_s", "0") in persistence_status(later, "left", NOW).values

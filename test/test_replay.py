@@ -10,12 +10,14 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+from mcap.reader import make_reader
 from mcap_ros2.reader import read_ros2_messages
 from rosbags.rosbag2 import Reader
 
-from prsm_health.bags import InputTopics
+from prsm_health.bags import InputTopics, read_motor_samples
 from prsm_health.bags.topics import DIAGNOSTICS_TOPIC, HEALTH_TOPIC
 from prsm_health.bags.typestore import typestore
+from prsm_health.bags.writer import BagWriter, write_motor_states
 from prsm_health.cli import main
 from prsm_health.estimation.params import EstimatorParams
 from prsm_health.replay import replay
@@ -23,6 +25,7 @@ from prsm_health.report import _band, plt
 from prsm_health.scenes.recording import record
 from prsm_health.scenes.scene import scene_from_mapping
 from prsm_health.scenes.simulator import Simulator
+from prsm_health.signals import MotorSamples
 
 SCENE = {
     "name": "replay-test",
@@ -168,3 +171,38 @@ def test_the_precision_loss_band_is_cut_at_zero() -> None:
     assert loss.min() == 0.0 and loss.max() == 3.0  # -1 uncut
     assert load.min() == -3.0
     assert labels == ["loss +-2 std, cut at 0", "loss", "load +-2 std", "load"]
+
+
+def test_diagnostics_go_on_after_the_clock_jumps_back(bag: Path, tmp_path: Path) -> None:
+    """The clock jumps back by 5 s halfway (the log times keep the arrival order): the
+    estimator follows the new time line after filter.time_reset_after_s, and /diagnostics
+    goes on about once per second of it instead of waiting until the old schedule's time."""
+    motor = read_motor_samples(bag, InputTopics())
+    half = len(motor) // 2
+    stamps = motor.stamp_s.copy()
+    stamps[half:] -= 5.0
+    jumped = tmp_path / "jumped"
+    arrival = 1_700_000_000_000_000_000 + np.arange(len(motor), dtype=np.int64) * 1_000_000
+    with BagWriter(jumped) as writer:
+        write_motor_states(
+            writer,
+            MotorSamples(stamps, motor.current_a, motor.speed_rad_s, motor.position_rad),
+            receive_time_ns=arrival,
+        )
+    out = tmp_path / "out"
+    result = replay(jumped, params(), out=out)
+    assert result.counters.time_resets == 1
+    with (out / "out.mcap").open("rb") as stream:  # in the order written, not sorted
+        seconds = [
+            message.log_time * 1e-9
+            for _, channel, message in make_reader(stream).iter_messages(log_time_order=False)
+            if channel.topic == DIAGNOSTICS_TOPIC
+        ]
+    jumps = np.flatnonzero(np.diff(seconds) < 0.0) + 1
+    assert len(jumps) == 1, f"diagnostics written on one time line only: {seconds}"
+    jump = int(jumps[0])
+    # Before the fix none came on the new time line until the old schedule's next second
+    # (7 s, the line's end): now they go on from the time reset (the first 0.1 s rejected).
+    new_line = np.array(seconds[jump:])
+    assert len(new_line) >= 4 and new_line[0] < stamps[half] + 1.2
+    assert np.all(np.diff(new_line) > 0.9)
