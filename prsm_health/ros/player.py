@@ -141,6 +141,8 @@ def _play(reader: Reader, options: PlayOptions, stop: threading.Event) -> PlayRe
             f"no topic {', '.join(unknown)} in the bag; it has {', '.join(sorted(available))}"
         )
     connections = [c for c in reader.connections if not options.topics or c.topic in options.topics]
+    if options.loop and not any(c.msgcount for c in connections):  # it would spin on nothing
+        raise PlayError("nothing to loop: the bag has no messages on the topics to play")
     node = rclpy.create_node("prsm_health_player")
     try:
         qos = QoSProfile(depth=PUBLISHER_DEPTH, reliability=QoSReliabilityPolicy.RELIABLE)

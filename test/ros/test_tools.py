@@ -47,6 +47,10 @@ def test_play_refuses_what_it_cannot_play(tmp_path: Path) -> None:
     nobody = cli("play", str(bag), "--wait-for-subscribers", "0.5")
     assert nobody.returncode == 1
     assert "no subscriber after 0.5 s on /motor_state" in nobody.stderr
+    empty = write_bag(tmp_path / "empty", synthetic_run(0.1)[:0])  # the topic, no message
+    looped = cli("play", str(empty), "--loop", timeout_s=30.0)  # it spun at 100 % CPU
+    assert looped.returncode == 1
+    assert "nothing to loop: the bag has no messages on the topics to play" in looped.stderr
 
 
 def test_play_publishes_every_message(tmp_path: Path) -> None:
