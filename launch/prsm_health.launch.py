@@ -2,10 +2,12 @@
 
     ros2 launch prsm_health prsm_health.launch.py hardware_id:=left input_topic:=/left/motor_state
 
-Every argument is a node parameter of the same name (docs/ros.md); an empty string keeps the
-node's default (params_file: the bundled config/default.yaml; state_file:
-~/.local/state/prsm_health/<hardware_id>.json). The node configures and activates itself
-(autostart); set autostart:=false to drive it through the lifecycle instead.
+Every node parameter is an argument of the same name with the node's default (docs/ros.md).
+Four of them default to an empty string, which the node reads as: params_file the bundled
+config/default.yaml, preset the params file's, input_topic motor_state or joint_states by
+input_type, state_file ~/.local/state/prsm_health/<hardware_id>.json; for the others an empty
+string is refused at configure. The node configures and activates itself (autostart); set
+autostart:=false to drive it through the lifecycle instead.
 """
 
 from launch import LaunchDescription
@@ -25,6 +27,8 @@ ARGUMENTS = (
     ("joint_name", "prsm_motor", str),
     ("effort_is", "current", str),
     ("input_qos", "sensor_data", str),
+    ("input_queue_depth", "1000", int),
+    ("batch_period_s", "0.005", float),
     ("health_rate_hz", "0.0", float),
     ("diagnostics_rate_hz", "1.0", float),
     ("state_file", "", str),

@@ -5,9 +5,10 @@ docs/ros.md and the launch file list. :func:`node_config` turns the values into 
 :class:`NodeConfig`, naming every bad parameter. ROS-free: the node builds the descriptors.
 
 Every parameter but ``autostart`` is applied at configure: while the node is configured
-(inactive or active) a change is refused with that reason; in the unconfigured state any
-value is accepted and checked at the next configure (so a bad value can be fixed through the
-lifecycle without a restart). ``autostart`` is read-only (it matters only at start).
+(inactive or active) a change is refused with that reason; in the unconfigured state a value
+outside its descriptor (range, type, choices) is refused at once and the rest is checked at
+the next configure (so a bad value can be fixed through the lifecycle without a restart).
+``autostart`` is read-only (it matters only at start).
 """
 
 from __future__ import annotations

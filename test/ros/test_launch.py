@@ -33,13 +33,16 @@ def _keyword(call: ast.Call, name: str) -> object:
     return ast.literal_eval(next(k.value for k in call.keywords if k.arg == name))
 
 
-def _arguments(tree: ast.Module) -> list[str]:
+def _arguments(tree: ast.Module) -> dict[str, str]:
+    """name -> default of the launch arguments."""
     for node in ast.walk(tree):
         if isinstance(node, ast.Assign) and any(
             isinstance(t, ast.Name) and t.id == "ARGUMENTS" for t in node.targets
         ):
             assert isinstance(node.value, ast.Tuple)
-            return [ast.literal_eval(e.elts[0]) for e in node.value.elts]  # type: ignore[attr-defined]
+            pairs = [ast.literal_eval(ast.Tuple(e.elts[:2])) for e in node.value.elts]  # type: ignore[attr-defined]
+            assert len(pairs) == len(dict(pairs))
+            return dict(pairs)
     raise AssertionError("no ARGUMENTS in the launch file")
 
 
@@ -55,16 +58,20 @@ def test_launch_file_names_the_installed_executable_and_node() -> None:
 
 
 def test_launch_arguments_are_node_parameters(ros: None) -> None:
-    names = _arguments(ast.parse(LAUNCH.read_text()))
-    assert len(names) == len(set(names))
+    defaults = _arguments(ast.parse(LAUNCH.read_text()))
+    names = list(defaults)
+    for spec in PARAMETERS:  # the node's default, as a launch argument writes it
+        written = defaults[spec.name]
+        kind = type(spec.default)
+        value = {"true": True, "false": False}[written] if kind is bool else kind(written)
+        assert value == spec.default, spec.name
     node = HealthNode(parameter_overrides=[])
     try:
         declared = set(node.list_parameters([], 0).names)
     finally:
         node.destroy_node()
     assert {spec.name for spec in PARAMETERS} | {"use_sim_time"} <= declared
-    assert set(names) <= declared
-    assert {"params_file", "hardware_id", "input_topic", "state_file"} <= set(names)
+    assert set(names) == {spec.name for spec in PARAMETERS} | {"use_sim_time"}  # every one
 
 
 def test_node_declares_descriptors(ros: None) -> None:
