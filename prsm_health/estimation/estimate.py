@@ -52,8 +52,3 @@ class HealthState:
     def jammed_rollers_most_likely(self) -> int:
         """The jam count with the largest probability."""
         return max(range(len(self.jam_probabilities)), key=self.jam_probabilities.__getitem__)
-
-    @property
-    def jam_probability(self) -> float:
-        """Probability that at least one roller is jammed."""
-        return 1.0 - self.jam_probabilities[0]

@@ -634,8 +634,6 @@ def _constant(value: FloatArray) -> Any:
     return function
 
 
-def _transition_apply(x: FloatArray, dt: float, transition: FloatArray | None = None) -> FloatArray:
+def _transition_apply(x: FloatArray, dt: float, transition: FloatArray) -> FloatArray:
     """Process function of the UKF: x -> F x (the same linear model as the EKF's)."""
-    if transition is None:
-        return x
     return np.asarray(transition @ x, dtype=np.float64)
