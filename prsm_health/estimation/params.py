@@ -238,9 +238,10 @@ class Fidelity:
     core at every evaluation, the naive reference). radial_terms: "auto" keeps the
     carrier-harmonic ripple states only when a radial load or a misalignment is configured;
     "on" always; "off" never. skip_standstill: no wear or fatigue integration at standstill
-    (the rates are zero there anyway; jam evidence is never used at standstill). prune_hypotheses: drop ruled-out jam counts and keep only the
-    next possible jam above the plausible ones. merge_standstill_blocks: one filter update
-    per standstill_block_s instead of per block while nothing moves. filter: "ekf" or "ukf".
+    (the rates are zero there anyway; jam evidence is never used at standstill).
+    prune_hypotheses: drop ruled-out jam counts and keep only the next possible jam above the
+    plausible ones. merge_standstill_blocks: one filter update per standstill_block_s instead
+    of per block while nothing moves. filter: "ekf" or "ukf".
     """
 
     surrogate: bool = True
