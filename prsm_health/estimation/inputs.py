@@ -72,7 +72,9 @@ class Block:
     stamp_s: mean stamp. duration_s: time since the previous block's mean stamp (the filter's
     prediction step, across a gap too; the grid period for the first block of a time line).
     motor_torque_nm: k_t times the mean current. motor_speed_rad_s, motor_acceleration_rad_s2:
-    mean speed, and the speed change over the block's span divided by that span.
+    mean speed, and the speed change over the block's span divided by that span;
+    motor_acceleration_var_rad2_s4: that acceleration's variance from the speed noise,
+    2 sigma^2 / span^2 (two samples' difference; 0 where the span is too short to take one).
     carrier_cos, carrier_sin: means of cos and sin of the carrier angle (exact averaging of
     the carrier-frequency ripple).
     direction: +1 or -1 when every sample moves that way faster than the standstill speed,
@@ -93,6 +95,7 @@ class Block:
     carrier_sin: float
     direction: int
     current_residual_var_a2: float = 0.0
+    motor_acceleration_var_rad2_s4: float = 0.0
     silence_before_s: float = 0.0
     after_gap: bool = False
     time_reset: bool = False
@@ -117,6 +120,11 @@ def merge_blocks(blocks: list[Block]) -> Block:
         carrier_sin=mean("carrier_sin"),
         direction=directions.pop() if len(directions) == 1 else 0,
         current_residual_var_a2=mean("current_residual_var_a2"),
+        # The variance of the weighted mean of independent accelerations.
+        motor_acceleration_var_rad2_s4=float(
+            np.dot(weights**2, [b.motor_acceleration_var_rad2_s4 for b in blocks])
+            / weights.sum() ** 2
+        ),
         silence_before_s=blocks[0].silence_before_s,
         after_gap=blocks[0].after_gap,
         time_reset=blocks[0].time_reset,
@@ -342,8 +350,13 @@ class SampleBlocker:
         # squares slope would miss an acceleration that starts or stops inside the block).
         last = np.r_[starts[1:], len(run)] - 1
         span = t[last]
-        slope = np.divide(
-            w[last] - w[starts], span, out=np.zeros_like(span), where=span > SHORTEST_SLOPE_SPAN_S
+        measurable = span > SHORTEST_SLOPE_SPAN_S
+        slope = np.divide(w[last] - w[starts], span, out=np.zeros_like(span), where=measurable)
+        slope_var = np.divide(
+            2.0 * self._params.noise.speed_std_rad_s**2,
+            span**2,
+            out=np.zeros_like(span),
+            where=measurable,
         )
         covariance_ti = means(t * run.current_a) - mean_t * mean_i
         trend = np.divide(covariance_ti**2, variance_t, out=np.zeros_like(mean_t), where=spread)
@@ -382,6 +395,7 @@ class SampleBlocker:
                     carrier_sin=float(sin_mean[b]),
                     direction=int(direction[b]),
                     current_residual_var_a2=float(residual_var[b]),
+                    motor_acceleration_var_rad2_s4=float(slope_var[b]),
                     silence_before_s=silence,
                     after_gap=bool(new_line[b]),
                     time_reset=reset,

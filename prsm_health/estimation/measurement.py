@@ -98,9 +98,6 @@ class TorqueModel:
         noise = params.noise
         self._torque_constant = drive.torque_constant_nm_per_a
         self._current_var = noise.current_std_a**2
-        self._accel_var_per_sample = (
-            12.0 * noise.speed_std_rad_s**2 / params.filter.block_duration_s**2
-        )
         self._model_rel = noise.model_error_rel
         self._model_floor_var = noise.model_error_floor_nm**2
         ratio = params.model.radial_load_ratio if params.radial_terms else 0.0
@@ -169,7 +166,7 @@ class TorqueModel:
             self._torque_constant**2
             * max(self._current_var, block.current_residual_var_a2)
             / block.samples
-            + self._inertia**2 * self._accel_var_per_sample / block.samples
+            + self._inertia**2 * block.motor_acceleration_var_rad2_s4
             + (self._model_rel * motor_torque) ** 2
             + self._model_floor_var
             + gear**2 * band_var

@@ -15,6 +15,7 @@ from prsm_health.estimation.inputs import (
     Block,
     RejectReason,
     SampleBlocker,
+    merge_blocks,
 )
 from prsm_health.estimation.params import EstimatorParams
 from prsm_health.physics.meshing import carrier_speed_rad_s
@@ -172,4 +173,21 @@ def test_samples_closer_than_a_microsecond_carry_no_acceleration() -> None:
     blocks, blocker = feed_in_chunks(samples, 3)
     assert blocker.counters.accepted == 3
     assert blocks[0].samples == 2 and blocks[0].motor_acceleration_rad_s2 == 0.0
+    assert blocks[0].motor_acceleration_var_rad2_s4 == 0.0
     assert all(math.isfinite(b.motor_acceleration_rad_s2) for b in blocks)
+
+
+def test_the_acceleration_variance_is_that_of_a_speed_difference() -> None:
+    """The block's acceleration is the speed change over its span, so its variance is
+    2 sigma^2 / span^2 (not a least-squares slope's 12 sigma^2 / (n T^2), about n / 6 times
+    smaller): measured over 400 noisy blocks of constant speed. A merged block's is that of
+    the sample-weighted mean."""
+    blocks, _ = feed_in_chunks(run(16.0, seed=4), 500)
+    full = [b for b in blocks if b.samples == 40]
+    sigma = PARAMS.noise.speed_std_rad_s
+    expected = 2.0 * sigma**2 / 0.039**2  # 40 samples 1 ms apart span 39 ms
+    assert all(b.motor_acceleration_var_rad2_s4 == pytest.approx(expected) for b in full)
+    measured = float(np.var([b.motor_acceleration_rad_s2 for b in full]))
+    assert measured == pytest.approx(expected, rel=0.2)  # 400 blocks: about 7 % sampling error
+    merged = merge_blocks(full[:5])
+    assert merged.motor_acceleration_var_rad2_s4 == pytest.approx(expected / 5)
