@@ -19,7 +19,7 @@ from prsm_health.estimation.hypotheses import (
     safe_sqrt,
 )
 from prsm_health.estimation.inputs import Block
-from prsm_health.estimation.measurement import LOAD, RIPPLE_COS, TorqueModel
+from prsm_health.estimation.measurement import LOAD, RIPPLE_COS, RIPPLE_SIN, TorqueModel
 from prsm_health.estimation.params import EstimatorParams, Fidelity, ModelParams
 from prsm_health.physics.presets import load_preset
 
@@ -319,3 +319,27 @@ def test_the_ripple_axis_is_kept_when_the_amplitude_shrinks_and_not_set_at_stand
     assert float(np.array([0.0, 1.0]) @ q @ np.array([0.0, 1.0])) == pytest.approx(0.01**2 * 0.04)
     _, none = ripple_walk(np.array([0.5, 0.0]), known, None, moving=False, dt=0.5, **WALK)
     assert none is None
+
+
+def test_a_new_jammed_roller_adds_the_ripple_prior_once() -> None:
+    """A jam born from count k >= 1 adds the new roller's ripple prior to the jammed rollers'
+    ripple (their phasors add); one born from the healthy screw has only the new roller's:
+    count 0's ripple states are never updated, and adding to them gave a first jam twice the
+    prior's variance."""
+    p = EstimatorParams(actuator=Actuator(preset=PRESET), model=ModelParams(jam_rate_per_h=3600.0))
+    bank = JamHypotheses(p, TorqueModel(p))
+    ripple = slice(RIPPLE_COS, RIPPLE_SIN + 1)
+    prior = p.model.ripple_prior_std**2
+    dim = bank.hypotheses[0].filter.dim_x
+    one = np.eye(dim) * 4.0
+    one[ripple, ripple] = [[0.5, 0.1], [0.1, 0.3]]
+    bank.hypotheses.append(Hypothesis(1, bank._new_filter(np.zeros(dim), one), math.log(0.5)))
+    bank.hypotheses[0].log_prob = math.log(0.5)
+    healthy = bank.hypotheses[0].filter.P.copy()
+    bank._merge(0.04)
+    born = {h.count: h.filter.P for h in bank.hypotheses if h.fresh}
+    np.testing.assert_array_equal(born[1][ripple, ripple], prior * np.eye(2))
+    np.testing.assert_array_equal(
+        born[1][:RIPPLE_COS, :RIPPLE_COS], healthy[:RIPPLE_COS, :RIPPLE_COS]
+    )
+    np.testing.assert_array_equal(born[2], one + np.diag([0.0] * RIPPLE_COS + [prior, prior]))
