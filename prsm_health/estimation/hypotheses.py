@@ -376,7 +376,7 @@ class JamHypotheses:
         fresh = [
             Hypothesis(
                 h.count + 1,
-                self._new_filter(h.filter.x, self._born_covariance(h)),
+                self._new_filter(h.filter.x, h.filter.P + self._jump_cov),
                 h.log_prob - (log_stay if h.count < self.n_rollers else 0.0) + log_jump,
                 fresh=True,
             )
@@ -384,17 +384,6 @@ class JamHypotheses:
             if h.count < self.n_rollers and math.isfinite(h.log_prob)
         ]
         self.hypotheses = established + fresh
-
-    def _born_covariance(self, parent: Hypothesis) -> FloatArray:
-        """The covariance of a jam born from ``parent``: the new roller adds its ripple's
-        prior (``ripple_prior_std``) to the jammed rollers' ripple; a healthy parent has no
-        ripple, so its ripple states (never updated, at their initial variance) are replaced,
-        not added to (that gave a first jam twice the prior's variance)."""
-        p: FloatArray = np.array(parent.filter.P, dtype=np.float64)
-        if parent.count == 0 and self._ripple:
-            self._forget(p, slice(RIPPLE_COS, RIPPLE_SIN + 1))
-            return p
-        return p + self._jump_cov
 
     def _groups(self, members: list[Hypothesis]) -> list[list[Hypothesis]]:
         """Members of one count in at most ``filter.components_per_count`` groups: each, most

@@ -96,7 +96,8 @@ class ModelParams:
     downhole cycle, 45 kN in 0.5 s, costs about one nat; a step in one block thousands).
     ripple_prior_std: size of the carrier-frequency torque ripple a new jammed roller adds, per
     cosine and sine component, relative to the load torque at the ripple knee (measurement.py;
-    0.3 for one roller with 6 kN radial load on dong2022-downhole).
+    0.3 for one roller with 6 kN radial load on dong2022-downhole); a first jam starts at
+    twice its variance (docs/estimation.md, load model).
     ripple_random_walk_per_sqrt_s: its drift as the radial load changes: along its phasor (the
     amplitude follows the wall's radial load), and in every direction while its phase is not yet
     known. ripple_phase_walk_per_sqrt_s: its drift across the phasor once the phase is known
