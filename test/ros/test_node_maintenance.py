@@ -5,7 +5,9 @@ once; what cannot be reset is refused with the reason."""
 from __future__ import annotations
 
 import json
+import shutil
 from pathlib import Path
+from typing import Any
 
 import pytest
 from prsm_health_msgs.srv import ResetAfterMaintenance
@@ -93,5 +95,67 @@ def test_a_reset_after_maintenance_over_the_service(ros: None, tmp_path: Path) -
                 assert not client.wait_for_service(timeout_sec=2.0)
             finally:
                 listener.node.destroy_client(client)
+    finally:
+        listener.close()
+
+
+@pytest.mark.timeout(120)
+def test_a_reset_whose_save_failed_is_saved_by_the_next_period(ros: None, tmp_path: Path) -> None:
+    """A reset changes the state without new samples (once no block is pending): if its save
+    fails (here a file stands where the state's directory was), the periodic save must still
+    write it once it can, although the sample count is the one saved before."""
+    folder = tmp_path / "state"
+    folder.mkdir()
+    state_file = folder / "state.json"
+    jam = write_bag(tmp_path / "jam", synthetic_run(2.0, jam_at_s=ORIGIN_S + 1.0))
+    listener = Listener("retried")
+    try:
+        with NodeProcess(
+            tmp_path,
+            "retried",
+            hardware_id="retried",
+            state_file=str(state_file),
+            save_period_s=0.5,
+        ) as node:
+            node.wait_log("configured")
+            listener.wait_matched()
+            play(jam, listener=listener)
+
+            def saved() -> dict[str, Any] | None:
+                try:
+                    return dict(json.loads(state_file.read_text())["estimator"])
+                except (OSError, ValueError):
+                    return None
+
+            listener.wait_for(
+                lambda: bool(listener.health) and listener.health[-1]["stamp"] > ORIGIN_S + 1.9,
+                20.0,
+                "the estimates of the bag",
+            )
+            # A first reset closes the pending block (new samples counted) and is saved.
+            assert listener.call(ResetAfterMaintenance, SERVICE, request(1)).success
+            listener.wait_for(
+                lambda: (
+                    (state := saved()) is not None
+                    and [h["count"] for h in state["hypotheses"]] == [1]
+                ),
+                10.0,
+                "the first reset saved",
+            )
+            shutil.rmtree(folder)
+            folder.write_text("in the way")
+            done = listener.call(ResetAfterMaintenance, SERVICE, request(0))
+            assert done.success, done.message
+            node.wait_log("cannot save the state")
+            folder.unlink()
+            folder.mkdir()
+            listener.wait_for(
+                lambda: (
+                    (state := saved()) is not None
+                    and [h["count"] for h in state["hypotheses"]] == [0]
+                ),
+                10.0,
+                "the reset state saved by the periodic save",
+            )
     finally:
         listener.close()
