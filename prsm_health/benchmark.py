@@ -36,7 +36,7 @@ import math
 import os
 import platform
 import time
-from collections.abc import Callable, Iterable
+from collections.abc import Callable, Iterable, Iterator
 from dataclasses import dataclass, field, fields
 from importlib import resources
 from pathlib import Path
@@ -389,8 +389,23 @@ class Timing:
         )
 
 
+class ScoredRun:
+    """What a run scored against the truth has (the base of :class:`Run` and
+    :class:`ToldCountRun`): its scene, :func:`score`'s metrics and the preset's largest paper
+    load (the RMSE floor's reference)."""
+
+    scene: str
+    metrics: Metrics
+    largest_load_n: float
+
+    @property
+    def rmse_percent_largest(self) -> float:
+        """Load RMSE while moving, % of the largest paper load."""
+        return 100.0 * self.metrics.load_rmse_n / self.largest_load_n
+
+
 @dataclass(frozen=True)
-class Run:
+class Run(ScoredRun):
     """One configuration on one scene (``kind`` "full") or on its naive excerpt ("excerpt").
 
     samples: samples estimated. chunked_s: wall time of the chunked run (bags: the replay,
@@ -425,11 +440,6 @@ class Run:
         if self.chunked_s is None or not self.decode_s:
             return None
         return self.chunked_s / self.decode_s
-
-    @property
-    def rmse_percent_largest(self) -> float:
-        """Load RMSE while moving, % of the largest paper load."""
-        return 100.0 * self.metrics.load_rmse_n / self.largest_load_n
 
 
 @dataclass(frozen=True)
@@ -481,7 +491,7 @@ class WearRun:
 
 
 @dataclass(frozen=True)
-class ToldCountRun:
+class ToldCountRun(ScoredRun):
     """The default configuration on a run with jams, told the true count at each onset
     (:func:`told_count`). Beside the same run's default estimates it splits the load error into
     what the count's identification costs and what remains with the right count.
@@ -493,11 +503,6 @@ class ToldCountRun:
     group: str
     metrics: Metrics
     largest_load_n: float
-
-    @property
-    def rmse_percent_largest(self) -> float:
-        """Load RMSE while moving, % of the largest paper load."""
-        return 100.0 * self.metrics.load_rmse_n / self.largest_load_n
 
 
 @dataclass(frozen=True)
@@ -583,14 +588,19 @@ def chunked(params: EstimatorParams, samples: MotorSamples) -> tuple[list[Health
     estimator = HealthEstimator(params)
     states: list[HealthState] = []
     elapsed = 0.0
-    for begin in range(0, len(samples), CHUNK_SAMPLES):
-        piece = samples[begin : begin + CHUNK_SAMPLES]
+    for piece in _chunks(samples):
         start = time.perf_counter()
         states += estimator.process(piece)
         elapsed += time.perf_counter() - start
     start = time.perf_counter()
     states += estimator.finish()
     return states, elapsed + time.perf_counter() - start
+
+
+def _chunks(samples: MotorSamples) -> Iterator[MotorSamples]:
+    """``samples`` in the replay's chunks of CHUNK_SAMPLES."""
+    for begin in range(0, len(samples), CHUNK_SAMPLES):
+        yield samples[begin : begin + CHUNK_SAMPLES]
 
 
 def told_count(
@@ -600,15 +610,14 @@ def told_count(
     true jam count at each of the truth's onsets (:meth:`HealthEstimator.reset_after_maintenance`
     at the first sample from the onset on; precision loss and fatigue damage kept): what the
     load filter achieves once the count is right, whatever the count's identification does."""
-    counts = truth.jammed_rollers
-    onsets = np.flatnonzero(np.diff(counts) > 0) + 1
+    counts, onsets = truth.jammed_rollers, truth.jam_onsets
     ends = [*np.searchsorted(samples.stamp_s, truth.stamp_s[onsets]).tolist(), len(samples)]
     estimator = HealthEstimator(params)
     states: list[HealthState] = []
     begin = 0
     for i, end in enumerate(ends):
-        for start in range(begin, end, CHUNK_SAMPLES):
-            states += estimator.process(samples[start : min(start + CHUNK_SAMPLES, end)])
+        for piece in _chunks(samples[begin:end]):
+            states += estimator.process(piece)
         if i < len(onsets):
             states += estimator.reset_after_maintenance(
                 int(counts[onsets[i]]), reset_precision_loss=False, reset_fatigue_damage=False
@@ -765,7 +774,7 @@ class _Bench:
                 self.runs.append(self._full_run(scene, config, samples, truth, decode))
                 self.progress(f"{scene.name} x {config.name}: {time.perf_counter() - begin:.1f} s")
         ran_default = scene.runs("default") and any(c.name == "default" for c in self.configs)
-        if ran_default and np.any(np.diff(truth.jammed_rollers) > 0):
+        if ran_default and len(truth.jam_onsets):
             begin = time.perf_counter()
             self.told.append(self._told_count_run(scene, samples, truth))
             self.progress(f"{scene.name} told the count: {time.perf_counter() - begin:.1f} s")

@@ -14,7 +14,7 @@ import math
 from collections.abc import Callable, Iterable, Sequence
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Any, Protocol, TypeVar
+from typing import Any, TypeVar
 
 import numpy as np
 
@@ -25,10 +25,10 @@ from prsm_health.benchmark import (
     BenchResults,
     JamOnset,
     Run,
+    ScoredRun,
     Timing,
     WearRun,
 )
-from prsm_health.estimation.metrics import Metrics
 
 #: The floors' thresholds (issue 6).
 NAIVE_SPEEDUP = 50.0
@@ -54,20 +54,8 @@ class Floor:
     passed: bool | None
 
 
-class Scored(Protocol):
-    """A run scored against the truth: a :class:`Run` or a :class:`ToldCountRun`."""
-
-    @property
-    def scene(self) -> str: ...
-
-    @property
-    def metrics(self) -> Metrics: ...
-
-    @property
-    def rmse_percent_largest(self) -> float: ...
-
-
-ScoredRun = TypeVar("ScoredRun", bound=Scored)
+#: A Run, or a ToldCountRun, in a floor.
+AnyRun = TypeVar("AnyRun", bound=ScoredRun)
 
 
 def _missing(name: str, requirement: str) -> Floor:
@@ -79,7 +67,7 @@ def pooled_timing(runs: Iterable[Run]) -> Timing:
     return Timing.of(np.concatenate([r.durations_ns for r in runs]))
 
 
-def pooled_rmse_percent(runs: Iterable[Scored]) -> float:
+def pooled_rmse_percent(runs: Iterable[ScoredRun]) -> float:
     """Load RMSE over the moving estimates of several runs, % of the largest paper load."""
     chosen = [r for r in runs if r.metrics.moving_estimates]
     if not chosen:
@@ -220,8 +208,8 @@ def prior_coverage(runs: list[WearRun]) -> float:
 def _floor(
     name: str,
     requirement: str,
-    runs: Sequence[ScoredRun],
-    measure: Callable[[Sequence[ScoredRun]], tuple[str, bool]],
+    runs: Sequence[AnyRun],
+    measure: Callable[[Sequence[AnyRun]], tuple[str, bool]],
 ) -> Floor:
     """A floor measured on ``runs`` by ``measure`` (text, verdict); "not measured" without."""
     if not runs:
@@ -249,7 +237,7 @@ def _replay(runs: Sequence[Run]) -> tuple[str, bool]:
     )
 
 
-def _rmse(runs: Sequence[Scored]) -> tuple[str, bool]:
+def _rmse(runs: Sequence[ScoredRun]) -> tuple[str, bool]:
     worst = max(runs, key=lambda r: r.rmse_percent_largest)
     return (
         f"largest {worst.rmse_percent_largest:.2f} % ({worst.scene}), pooled "
@@ -271,7 +259,7 @@ def _false_jams(runs: Sequence[Run]) -> tuple[str, bool]:
     )
 
 
-def _nees(runs: Sequence[Scored]) -> tuple[str, bool]:
+def _nees(runs: Sequence[ScoredRun]) -> tuple[str, bool]:
     failed = [r.scene for r in runs if not r.metrics.load_nees_consistent]
     listed = f"; not: {', '.join(failed)}" if failed else ""
     return f"{len(runs) - len(failed)}/{len(runs)} consistent{listed}", not failed

@@ -101,3 +101,8 @@ class TruthSamples:
     def jammed_rollers(self) -> IntArray:
         """Number of jammed rollers per sample."""
         return np.asarray(self.roller_jammed.sum(axis=1), dtype=np.int64)
+
+    @property
+    def jam_onsets(self) -> IntArray:
+        """Indices of the samples at which the jammed-roller count rises."""
+        return np.flatnonzero(np.diff(self.jammed_rollers) > 0) + 1

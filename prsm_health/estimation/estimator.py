@@ -199,9 +199,10 @@ class HealthEstimator:
                 rollers); nothing is done then.
         """
         rollers = self._bank.n_rollers
-        count = jammed_rollers
-        whole = isinstance(count, int | np.integer) and not isinstance(count, bool)
-        if not (whole and 0 <= count <= rollers):
+        whole = isinstance(jammed_rollers, int | np.integer) and not isinstance(
+            jammed_rollers, bool
+        )
+        if not (whole and 0 <= jammed_rollers <= rollers):
             raise ValueError(
                 f"jammed_rollers: must be an integer within 0..{rollers} (the rollers of "
                 f"{self.params.actuator.preset.name}), got {jammed_rollers!r}"

@@ -196,9 +196,8 @@ def _jam_detections(
     truth: TruthSamples, seen_until: FloatArray, estimated: NDArray[np.int64]
 ) -> list[JamDetection]:
     counts = truth.jammed_rollers
-    onsets = np.flatnonzero(np.diff(counts) > 0) + 1
     detections = []
-    for index in onsets:
+    for index in truth.jam_onsets:
         onset = float(truth.stamp_s[index])
         count = int(counts[index])
         after = np.flatnonzero((seen_until >= onset) & (estimated == count))

@@ -2,7 +2,8 @@
 
 :data:`PARAMETERS` is what the node declares (with ROS descriptors built from it) and what
 docs/ros.md and the launch file list. :func:`node_config` turns the values into a validated
-:class:`NodeConfig`, naming every bad parameter. ROS-free: the node builds the descriptors.
+:class:`NodeConfig`, naming every bad parameter. Free of ROS nodes: the node builds the
+descriptors; only rclpy's topic-name check is used here.
 
 Every parameter but ``autostart`` is applied at configure: while the node is configured
 (inactive or active) a change is refused with that reason; in the unconfigured state a value

@@ -7,7 +7,6 @@ from __future__ import annotations
 import json
 import shutil
 from pathlib import Path
-from typing import Any
 
 import pytest
 from prsm_health_msgs.srv import ResetAfterMaintenance
@@ -121,11 +120,13 @@ def test_a_reset_whose_save_failed_is_saved_by_the_next_period(ros: None, tmp_pa
             listener.wait_matched()
             play(jam, listener=listener)
 
-            def saved() -> dict[str, Any] | None:
+            def saved_counts() -> list[int] | None:
+                """The jam counts of the saved state's hypotheses (None: none readable)."""
                 try:
-                    return dict(json.loads(state_file.read_text())["estimator"])
+                    hypotheses = json.loads(state_file.read_text())["estimator"]["hypotheses"]
                 except (OSError, ValueError):
                     return None
+                return [h["count"] for h in hypotheses]
 
             listener.wait_for(
                 lambda: bool(listener.health) and listener.health[-1]["stamp"] > ORIGIN_S + 1.9,
@@ -134,14 +135,7 @@ def test_a_reset_whose_save_failed_is_saved_by_the_next_period(ros: None, tmp_pa
             )
             # A first reset closes the pending block (new samples counted) and is saved.
             assert listener.call(ResetAfterMaintenance, SERVICE, request(1)).success
-            listener.wait_for(
-                lambda: (
-                    (state := saved()) is not None
-                    and [h["count"] for h in state["hypotheses"]] == [1]
-                ),
-                10.0,
-                "the first reset saved",
-            )
+            listener.wait_for(lambda: saved_counts() == [1], 10.0, "the first reset saved")
             shutil.rmtree(folder)
             folder.write_text("in the way")
             done = listener.call(ResetAfterMaintenance, SERVICE, request(0))
@@ -150,12 +144,7 @@ def test_a_reset_whose_save_failed_is_saved_by_the_next_period(ros: None, tmp_pa
             folder.unlink()
             folder.mkdir()
             listener.wait_for(
-                lambda: (
-                    (state := saved()) is not None
-                    and [h["count"] for h in state["hypotheses"]] == [0]
-                ),
-                10.0,
-                "the reset state saved by the periodic save",
+                lambda: saved_counts() == [0], 10.0, "the reset state saved by the periodic save"
             )
     finally:
         listener.close()
