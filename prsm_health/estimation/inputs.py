@@ -8,8 +8,9 @@ each block becomes one filter measurement (:class:`Block`). Everything is vector
 samples of a chunk; only chunks with time going backwards take a per-sample path.
 
 Time handling: a stamp that does not advance is rejected (TIME_BACKWARDS). If the stamps keep
-coming from a jumped-back clock for ``filter.time_reset_after_s`` of their own time, the new
-time line is accepted and the next block carries ``time_reset``. A gap longer than
+coming from a jumped-back clock, advancing on their own for ``filter.time_reset_after_s`` and
+over at least TIME_RESET_SAMPLES samples, the new time line is accepted and the next block
+carries ``time_reset``. A gap longer than
 ``filter.max_gap_s`` between accepted samples starts a new block with ``after_gap``.
 """
 
@@ -38,6 +39,10 @@ STUCK_RUN_SAMPLES = 20
 #: A block whose samples span less than this [s] has no measurable slope: its acceleration
 #: and current trend are taken as zero (a speed step over a vanishing span would overflow).
 SHORTEST_SLOPE_SPAN_S = 1e-6
+#: A jumped-back clock is followed only after this many samples advancing on its new time
+#: line (and ``filter.time_reset_after_s`` of its time): a few late samples far apart, a
+#: stale message or two delivered out of order, are rejected, not a new time line.
+TIME_RESET_SAMPLES = 10
 
 
 class RejectReason(enum.IntEnum):
@@ -152,7 +157,9 @@ class SampleBlocker:
         self._spike_a = SPIKE_SIGMAS * params.noise.current_std_a
         self.counters = InputCounters()
         self._last_stamp = -math.inf
-        self._backwards_since: float | None = None
+        self._backwards_since: float | None = None  # where the jumped-back line started
+        self._backwards_last = -math.inf  # its latest stamp
+        self._backwards_samples = 0  # its samples so far, advancing
         self._pending = _empty()
         self._anchor: float | None = None
         self._last_block_stamp: float | None = None
@@ -228,9 +235,15 @@ class SampleBlocker:
             if stamp > self._last_stamp:
                 self._last_stamp, self._backwards_since = stamp, None
                 continue
-            if self._backwards_since is None or stamp < self._backwards_since:
-                self._backwards_since = stamp
-            if stamp - self._backwards_since >= reset_after:
+            if self._backwards_since is None or stamp < self._backwards_last:
+                # A jumped-back line starts here (a stamp going back on it starts another).
+                self._backwards_since, self._backwards_samples = stamp, 0
+            self._backwards_last = stamp
+            self._backwards_samples += 1
+            if (
+                stamp - self._backwards_since >= reset_after
+                and self._backwards_samples >= TIME_RESET_SAMPLES
+            ):
                 # The jumped-back time line has advanced on its own: follow it from here.
                 self._last_stamp, self._backwards_since = stamp, None
                 self.counters.time_resets += 1

@@ -159,7 +159,8 @@ class FilterParams:
     max_gap_s: a longer gap between accepted samples starts a new block grid (the block after
     it is never merged into a standstill), and one block integrates wear and fatigue over at
     most this long. time_reset_after_s: time going backwards is rejected until the
-    jumped-back clock has advanced this long on its own; then it is followed and the load
+    jumped-back clock has advanced this long on its own (over at least
+    inputs.TIME_RESET_SAMPLES samples); then it is followed and the load
     re-initialised (event TIME_RESET). (A silence of more than estimator.HOLE_BLOCKS blocks
     keeps the load but forgets its derivatives.) gate_nis: a block whose
     normalised innovation squared exceeds it in every active hypothesis is rejected as an
