@@ -142,30 +142,28 @@ def test_time_going_backwards_is_rejected_then_followed_as_a_new_time_line() -> 
     )
 
 
+def with_late_samples(samples: MotorSamples, at: int, stamps: np.ndarray) -> MotorSamples:
+    """``samples`` with samples stamped ``stamps`` (the first sample's values) delivered
+    before sample ``at``."""
+    order = np.r_[np.arange(at), np.zeros(len(stamps), dtype=int), np.arange(at, len(samples))]
+    late = samples[order]
+    late.stamp_s[at : at + len(stamps)] = stamps
+    return late
+
+
 def test_a_few_late_samples_far_apart_are_rejected_not_a_new_time_line() -> None:
     # Two stale samples from 1 s earlier, 0.15 s apart (more than time_reset_after_s), then
-    # TIME_RESET_SAMPLES - 2 more from that old line: too few samples to follow it.
+    # TIME_RESET_SAMPLES - 3 more from that old line: too few samples to follow it.
     samples = run(2.0)
     late_count = TIME_RESET_SAMPLES - 1
     late_stamps = samples.stamp_s[1000] - 1.0 + 0.15 * np.arange(late_count) / (late_count - 1)
     assert late_stamps[-1] - late_stamps[0] > PARAMS.filter.time_reset_after_s
-    order = np.r_[np.arange(1000), np.zeros(late_count, dtype=int), np.arange(1000, 2000)]
-    stamps = samples.stamp_s[order]
-    stamps[1000 : 1000 + late_count] = late_stamps
-    late = MotorSamples(
-        stamps, samples.current_a[order], samples.speed_rad_s[order], samples.position_rad[order]
-    )
-    blocks, blocker = feed_in_chunks(late, 128)
+    blocks, blocker = feed_in_chunks(with_late_samples(samples, 1000, late_stamps), 128)
     assert blocker.counters.time_resets == 0
     assert blocker.counters.rejected[RejectReason.TIME_BACKWARDS] == late_count
     assert not any(b.time_reset for b in blocks)
     # One more sample on that line, and it is followed.
-    order = np.r_[np.arange(1000), np.zeros(late_count + 1, dtype=int), np.arange(1000, 2000)]
-    stamps = samples.stamp_s[order]
-    stamps[1000 : 1001 + late_count] = np.r_[late_stamps, late_stamps[-1] + 0.01]
-    followed = MotorSamples(
-        stamps, samples.current_a[order], samples.speed_rad_s[order], samples.position_rad[order]
-    )
+    followed = with_late_samples(samples, 1000, np.r_[late_stamps, late_stamps[-1] + 0.01])
     _, blocker = feed_in_chunks(followed, 128)
     assert blocker.counters.time_resets == 1
 

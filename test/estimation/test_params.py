@@ -79,7 +79,7 @@ def test_no_radial_load_and_aligned_drops_the_ripple_states() -> None:
             },
             "diagnostics.load_warn_fraction",
         ),
-        # A repeated stamp would be a new time line at once.
+        # Repeated stamps would be a new time line after TIME_RESET_SAMPLES of them.
         (
             {"actuator": {"preset": "dong2022-downhole"}, "filter": {"time_reset_after_s": 0}},
             "filter.time_reset_after_s",
