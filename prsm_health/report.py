@@ -3,7 +3,9 @@
 ``prsm-health replay BAG --report DIR`` writes ``load.png`` (axial load with +-2 std and the
 truth), ``jams.png`` (probability of each jam count over time, the true count on top),
 ``precision_loss.png`` (estimate +-2 std, cut at zero, and the truth) and ``index.html`` (the
-three plots and the metrics). matplotlib's Agg backend: no display needed.
+three plots and the metrics). After a sensor time reset the estimates are drawn on the truth's
+clock, shifted by the offsets the metrics found (the x label says by how much). matplotlib's
+Agg backend: no display needed.
 """
 
 from __future__ import annotations
@@ -24,7 +26,7 @@ from matplotlib.ticker import MaxNLocator
 from numpy.typing import NDArray
 
 from prsm_health.estimation.estimate import UM_PER_M, HealthState
-from prsm_health.estimation.metrics import Metrics
+from prsm_health.estimation.metrics import Metrics, on_truth_clock
 from prsm_health.signals import TruthSamples
 
 FloatArray = NDArray[np.float64]
@@ -41,9 +43,13 @@ class _Series:
     loss_std_um: FloatArray
 
 
-def _series(states: list[HealthState]) -> _Series:
+def _series(states: list[HealthState], clock_offsets_s: tuple[float, ...] | None) -> _Series:
+    """The estimates to plot. With ``clock_offsets_s`` (the metrics', one per sensor time
+    reset) on the truth's clock, shifted after each reset as the scoring did; without, on the
+    sensor's."""
+    stamps = np.array([s.stamp_s for s in states])
     return _Series(
-        stamp_s=np.array([s.stamp_s for s in states]),
+        stamp_s=stamps if clock_offsets_s is None else on_truth_clock(states, clock_offsets_s),
         load_kn=np.array([s.axial_load_n for s in states]) / 1e3,
         load_std_kn=np.array([s.axial_load_std_n for s in states]) / 1e3,
         jams=np.array([s.jam_probabilities for s in states]),
@@ -81,15 +87,20 @@ def write_report(
     if not states:
         raise ValueError("report: no estimates to plot")
     directory.mkdir(parents=True, exist_ok=True)
-    series = _series(states)
+    offsets = metrics.clock_offsets_s if metrics is not None else None
+    series = _series(states, offsets)
     t = series.stamp_s
+    xlabel = "time [s]"
+    if offsets:
+        shifts = ", ".join(f"{offset:+.3f} s" for offset in offsets)
+        xlabel += f" (estimates after a sensor time reset shifted by {shifts}, as scored)"
     figures = []
 
     figure, axis = plt.subplots(figsize=(10, 4))
     _band(axis, t, series.load_kn, series.load_std_kn, "estimate")
     if truth is not None:
         axis.plot(truth.stamp_s, truth.axial_load_n / 1e3, "k--", lw=0.8, label="truth")
-    axis.set(xlabel="time [s]", ylabel="axial load [kN]", title=f"{title}: axial load")
+    axis.set(xlabel=xlabel, ylabel="axial load [kN]", title=f"{title}: axial load")
     axis.legend(loc="best")
     figures.append(figure)
 
@@ -107,7 +118,7 @@ def write_report(
         axis2.set_ylabel("true jammed rollers")
         axis2.set_ylim(-0.1, max(2, int(truth.jammed_rollers.max()) + 1))
         axis2.yaxis.set_major_locator(MaxNLocator(integer=True))
-    axis.set(xlabel="time [s]", ylabel="probability", ylim=(0, 1), title=f"{title}: jams")
+    axis.set(xlabel=xlabel, ylabel="probability", ylim=(0, 1), title=f"{title}: jams")
     # Below the axes: inside, it would cover the probabilities it names.
     axis.legend(handles=handles, loc="upper center", bbox_to_anchor=(0.5, -0.15), ncols=6)
     figures.append(figure)
@@ -116,7 +127,7 @@ def write_report(
     _band(axis, t, series.loss_um, series.loss_std_um, "estimate", non_negative=True)
     if truth is not None:
         axis.plot(truth.stamp_s, truth.precision_loss_m * UM_PER_M, "k--", lw=0.8, label="truth")
-    axis.set(xlabel="time [s]", ylabel="precision loss [µm]", title=f"{title}: precision loss")
+    axis.set(xlabel=xlabel, ylabel="precision loss [µm]", title=f"{title}: precision loss")
     axis.legend(loc="best")
     figures.append(figure)
 

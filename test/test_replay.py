@@ -19,13 +19,16 @@ from prsm_health.bags.topics import DIAGNOSTICS_TOPIC, HEALTH_TOPIC
 from prsm_health.bags.typestore import typestore
 from prsm_health.bags.writer import BagWriter, write_motor_states
 from prsm_health.cli import main
+from prsm_health.estimation.estimate import EstimateEvent
 from prsm_health.estimation.params import EstimatorParams
 from prsm_health.replay import replay
-from prsm_health.report import _band, plt
+from prsm_health.report import _band, _series, plt
 from prsm_health.scenes.recording import record
-from prsm_health.scenes.scene import scene_from_mapping
+from prsm_health.scenes.scene import load_scene, scene_from_mapping
 from prsm_health.scenes.simulator import Simulator
 from prsm_health.signals import MotorSamples
+
+BUNDLED_BAGS = Path(__file__).resolve().parents[1] / "bags"
 
 SCENE = {
     "name": "replay-test",
@@ -110,6 +113,32 @@ def test_a_truncated_bag_reports_what_was_read_and_names_the_damage(
     assert result.damage is not None and str(mcap) in str(result.damage)
     assert 0 < result.samples < 12_000
     assert result.states and result.states[-1].stamp_s > 2.0
+
+
+def test_the_report_draws_the_estimates_on_the_truths_clock_after_a_time_reset() -> None:
+    # The bundled sensor-faults bag: its header stamps jump back by 0.5 s at 40 s.
+    result = replay(
+        BUNDLED_BAGS / "sensor-faults",
+        EstimatorParams(actuator=load_scene("sensor-faults").actuator),
+    )
+    assert result.metrics is not None and result.truth is not None
+    truth = result.truth
+    offsets = result.metrics.clock_offsets_s
+    assert offsets == pytest.approx((0.5,), abs=0.01)
+    reset = [i for i, s in enumerate(result.states) if s.event == EstimateEvent.TIME_RESET]
+    assert len(reset) == 1
+    after = slice(reset[0], None)
+    drawn, on_sensor_clock = _series(result.states, offsets), _series(result.states, None)
+
+    def rms_error_kn(series_stamps: np.ndarray, load_kn: np.ndarray) -> float:
+        true_kn = np.interp(series_stamps, truth.stamp_s, truth.axial_load_n / 1e3)
+        return float(np.sqrt(np.mean((load_kn - true_kn) ** 2)))
+
+    # Drawn as scored, the estimates after the reset lie on the truth (0.05 kN measured);
+    # on the sensor's clock they would lead it by half a second (5.4 kN).
+    assert rms_error_kn(drawn.stamp_s[after], drawn.load_kn[after]) < 0.2
+    assert rms_error_kn(on_sensor_clock.stamp_s[after], on_sensor_clock.load_kn[after]) > 2.0
+    assert np.array_equal(drawn.stamp_s[: reset[0]], on_sensor_clock.stamp_s[: reset[0]])
 
 
 def test_cli_writes_report_and_metrics_and_exits_1_on_damage(

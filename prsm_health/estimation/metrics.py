@@ -162,10 +162,8 @@ def _on_truth_time(
     """Estimate stamps on the truth's clock, and the offsets applied after each time reset."""
     stamps = np.array([s.stamp_s for s in states])
     speed = np.array([s.screw_speed_rad_s for s in states])
-    resets = [i for i, s in enumerate(states) if s.event == EstimateEvent.TIME_RESET]
     offsets = []
-    for begin, end in zip(resets, [*resets[1:], len(states)], strict=False):
-        segment = slice(begin, end)
+    for segment in _after_time_resets(states):
         best = 0.0
         for step in (1e-2, 1e-3):
             span = MAX_CLOCK_OFFSET_S if step == 1e-2 else 2e-2
@@ -174,9 +172,28 @@ def _on_truth_time(
             truth_speed = np.interp(shifted, truth.stamp_s, truth.screw_speed_rad_s)
             errors = np.mean((truth_speed - speed[segment][None, :]) ** 2, axis=1)
             best = float(candidates[int(np.argmin(errors))])
-        stamps[segment] += best
         offsets.append(best)
-    return stamps, tuple(offsets)
+    return on_truth_clock(states, tuple(offsets)), tuple(offsets)
+
+
+def on_truth_clock(states: list[HealthState], offsets_s: tuple[float, ...]) -> FloatArray:
+    """The stamps of ``states`` with ``offsets_s[i]`` added from their i-th TIME_RESET on: the
+    time line :func:`score` compares on (``Metrics.clock_offsets_s``)."""
+    stamps = np.array([s.stamp_s for s in states])
+    segments = _after_time_resets(states)
+    if len(offsets_s) != len(segments):
+        raise ValueError(
+            f"on_truth_clock: {len(offsets_s)} offsets for {len(segments)} time resets"
+        )
+    for segment, offset in zip(segments, offsets_s, strict=True):
+        stamps[segment] += offset
+    return stamps
+
+
+def _after_time_resets(states: list[HealthState]) -> list[slice]:
+    """The estimates from each TIME_RESET to the next (or the end)."""
+    resets = [i for i, s in enumerate(states) if s.event == EstimateEvent.TIME_RESET]
+    return [slice(b, e) for b, e in zip(resets, [*resets[1:], len(states)], strict=False)]
 
 
 def _nees_test(stamps: FloatArray, nees: FloatArray) -> tuple[float, tuple[float, float], bool]:
