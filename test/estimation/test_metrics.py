@@ -8,7 +8,7 @@ import numpy as np
 import pytest
 
 from prsm_health.estimation.estimate import EstimateEvent, HealthState
-from prsm_health.estimation.metrics import score
+from prsm_health.estimation.metrics import on_truth_clock, score
 from prsm_health.signals import TruthSamples
 
 N_ROLLERS = 10
@@ -111,3 +111,15 @@ def test_the_block_in_which_a_roller_seizes_may_report_it() -> None:
         early, truth(20.0, 9.985), rated_load_n=55e3, largest_screw_speed_rad_s=73.3
     )
     assert one_block_early.false_jam_declarations == 1
+
+
+def test_on_truth_clock_shifts_each_time_line_by_its_own_offset() -> None:
+    """Each offset applies from its TIME_RESET to the next; the estimates before the first
+    reset keep their stamps; offsets that do not match the resets are refused by name."""
+    states = [state(float(t), 20e3, 100.0, 0, 0.0) for t in (1.0, 2.0, 3.0, 1.5, 2.5, 9.0)]
+    states[3] = dataclasses.replace(states[3], event=EstimateEvent.TIME_RESET)
+    states[5] = dataclasses.replace(states[5], event=EstimateEvent.TIME_RESET)
+    shifted = on_truth_clock(states, (2.0, -5.0))
+    np.testing.assert_allclose(shifted, [1.0, 2.0, 3.0, 3.5, 4.5, 4.0])
+    with pytest.raises(ValueError, match="1 offsets for 2 time resets"):
+        on_truth_clock(states, (2.0,))
