@@ -87,7 +87,25 @@ TWO_JAM_SEED = 2026
 #: next eight have four, so the floors see that case too (and the first eight are unchanged).
 TWO_JAM_RUNS = 16
 ONE_JAM_SEED = 500
+ONE_JAM_RUNS = 8
 WEAR_PRIOR_SEED = 300
+WEAR_PRIOR_RUNS = 20
+#: Generated runs of the full plan per group: (base seed, scene seeds used from it).
+_DEFAULT_SEEDS = {
+    "two-jam": (TWO_JAM_SEED, TWO_JAM_RUNS),
+    "one-jam": (ONE_JAM_SEED, ONE_JAM_RUNS),
+    "wear-prior": (WEAR_PRIOR_SEED, WEAR_PRIOR_RUNS),
+    "nominal-10min": (LONG_SEEDS["nominal-10min"], 1),
+    "nominal-1h": (LONG_SEEDS["nominal-1h"], 1),
+}
+#: ``--held-out SEED``: each group's base seed is SEED plus this.
+_HELD_OUT_OFFSETS = {
+    "two-jam": 0,
+    "one-jam": 100,
+    "wear-prior": 200,
+    "nominal-10min": 300,
+    "nominal-1h": 301,
+}
 #: A two-jam run's jams start at least this long before its end (one cycle is 18-25 s).
 JAM_MARGIN_S = 25.0
 #: A jam onset counts as steady motion above this fraction of its stroke's largest load.
@@ -274,27 +292,64 @@ def _bag_scenes(bags: Path, names: Iterable[str]) -> list[BenchScene]:
     ]
 
 
-def full_plan(bags: Path = DEFAULT_BAGS) -> Plan:
-    """Every configuration on every scene of issue 6 (about half an hour on 2 cores)."""
+def held_out_seeds(seed: int) -> dict[str, int]:
+    """The base seed of each generated group for ``--held-out seed``: runs that no tuning on
+    the default plan has seen. Refuses a seed whose scene seeds (base + run index) meet any of
+    the default plan's, naming the groups."""
+    if isinstance(seed, bool) or not isinstance(seed, int) or seed < 0:
+        raise ValueError(f"--held-out: a seed must be an integer >= 0, got {seed!r}")
+    seeds = {group: seed + offset for group, offset in _HELD_OUT_OFFSETS.items()}
+    for group, base in seeds.items():
+        runs = range(base, base + _DEFAULT_SEEDS[group][1])
+        for default_group, (default_base, count) in _DEFAULT_SEEDS.items():
+            default_runs = range(default_base, default_base + count)
+            if max(runs.start, default_runs.start) < min(runs.stop, default_runs.stop):
+                raise ValueError(
+                    f"--held-out {seed}: its {group} runs (seeds {runs.start}-{runs.stop - 1}) "
+                    f"meet the default plan's {default_group} runs (seeds "
+                    f"{default_runs.start}-{default_runs.stop - 1}); choose another seed"
+                )
+    return seeds
+
+
+def full_plan(bags: Path = DEFAULT_BAGS, *, held_out: int | None = None) -> Plan:
+    """Every configuration on every scene of issue 6 (about half an hour on 2 cores). With
+    ``held_out``, the generated groups are drawn from other seeds (:func:`held_out_seeds`)."""
+    seeds = (
+        {group: base for group, (base, _) in _DEFAULT_SEEDS.items()}
+        if held_out is None
+        else held_out_seeds(held_out)
+    )
     long = [
         BenchScene(
             "nominal-10min",
             "long",
-            _generated("nominal-10min", "nominal-downhole", duration_s=600.0, seed=101),
+            _generated(
+                "nominal-10min",
+                "nominal-downhole",
+                duration_s=600.0,
+                seed=seeds["nominal-10min"],
+            ),
         ),
         BenchScene(
             "nominal-1h",
             "long",
-            _generated("nominal-1h", "nominal-downhole", duration_s=3600.0, seed=102),
+            _generated(
+                "nominal-1h", "nominal-downhole", duration_s=3600.0, seed=seeds["nominal-1h"]
+            ),
             configs=("default",),
         ),
     ]
-    two_jam = [BenchScene(s.name, "two-jam", s) for s in two_jam_scenes(TWO_JAM_RUNS)]
+    two_jam = [
+        BenchScene(s.name, "two-jam", s)
+        for s in two_jam_scenes(TWO_JAM_RUNS, seed=seeds["two-jam"])
+    ]
     one_jam = [
-        BenchScene(s.name, "one-jam", s, configs=("default",)) for s in one_jam_scenes(8, 300.0)
+        BenchScene(s.name, "one-jam", s, configs=("default",))
+        for s in one_jam_scenes(ONE_JAM_RUNS, 300.0, seed=seeds["one-jam"])
     ]
     return Plan(
-        mode="full",
+        mode="full" if held_out is None else f"full, held-out seed {held_out}",
         scenes=(*_bag_scenes(bags, BAG_SCENES), *long, *two_jam, *one_jam),
         configs=CONFIGURATIONS,
         timing_samples=20_000,
@@ -302,7 +357,7 @@ def full_plan(bags: Path = DEFAULT_BAGS) -> Plan:
         naive_seconds=6.0,
         repeats=3,
         wear_bag=bags / "accelerated-wear",
-        wear_prior=tuple(wear_prior_scenes(20, 30.0)),
+        wear_prior=tuple(wear_prior_scenes(WEAR_PRIOR_RUNS, 30.0, seed=seeds["wear-prior"])),
     )
 
 

@@ -25,6 +25,7 @@ from prsm_health.benchmark import (
     JamOnset,
     Plan,
     cycle_period_s,
+    full_plan,
     one_jam_scenes,
     onset_category,
     quick_plan,
@@ -49,7 +50,7 @@ from prsm_health.estimation.params import EstimatorParams, ModelParams
 from prsm_health.physics.presets import load_preset
 from prsm_health.physics.roller_table import roller_values
 from prsm_health.scenes.recording import record
-from prsm_health.scenes.scene import load_scene, scene_from_mapping
+from prsm_health.scenes.scene import Scene, load_scene, scene_from_mapping
 from prsm_health.scenes.simulator import Simulator, simulate
 from prsm_health.signals import TruthSamples
 from test.estimation.test_estimator import downhole
@@ -352,6 +353,35 @@ def test_selection_by_name_and_group_and_unknown_names() -> None:
         select(plan, scenes=["nope"], configs=None)
     with pytest.raises(ValueError, match="unknown fast"):
         select(plan, scenes=None, configs=["fast"])
+
+
+def test_held_out_plan_draws_its_generated_runs_from_other_seeds() -> None:
+    default, held_out = full_plan(), full_plan(held_out=7777)
+    assert held_out.mode == "full, held-out seed 7777"
+
+    def generated(plan: Plan) -> list[Scene]:
+        return [s.scene for s in plan.scenes if s.bag is None] + list(plan.wear_prior)
+
+    assert [s.name for s in generated(held_out)] == [s.name for s in generated(default)]
+    assert not {s.seed for s in generated(held_out)} & {s.seed for s in generated(default)}
+    two_jam = [
+        [s.scene.jams for s in p.scenes if s.group == "two-jam"] for p in (default, held_out)
+    ]
+    assert two_jam[0] != two_jam[1]
+    assert [s.bag for s in held_out.scenes if s.bag] == [s.bag for s in default.scenes if s.bag]
+    with pytest.raises(ValueError, match=r"two-jam runs \(seeds 2020-2035\) meet the default"):
+        full_plan(held_out=2020)
+    with pytest.raises(ValueError, match=r"wear-prior runs \(seeds 310-329\) meet the default"):
+        full_plan(held_out=110)
+
+
+def test_cli_refuses_a_held_out_seed_with_the_quick_plan_or_one_that_meets_the_plan(
+    capsys: pytest.CaptureFixture[str],
+) -> None:
+    assert main(["bench", "--quick", "--held-out", "7777"]) == 2
+    assert "only with the full plan" in capsys.readouterr().err
+    assert main(["bench", "--held-out", "2030", "--out", "unused"]) == 2
+    assert "meet the default plan's two-jam runs" in capsys.readouterr().err
 
 
 def test_cli_refuses_unknown_configurations(capsys: pytest.CaptureFixture[str]) -> None:
