@@ -349,16 +349,24 @@ def diagnostic_statuses(
     is STALE when the last input is older than ``thresholds.stale_timeout_s`` or never came.
     """
     events = events if events is not None else FilterEvents()
-    fields = health_estimate_fields(state) if state is not None else None
+    fields: dict[str, Any] | None = None
     parts: list[tuple[str, _Part]]
-    if fields is None:
+    if state is None:
         parts = [(name, (Level.OK, "no estimate yet", [])) for name in STATUS_NAMES[:4]]
     else:
+        fields = health_estimate_fields(state)
+        # Each estimator status says which estimate it reports (the sensor's stamp of its
+        # block, to the millisecond: epoch stamps need more than _num's six digits); behind a
+        # backlog of samples the node's clock runs ahead of it.
+        stamp = ("estimate_stamp_s", f"{state.stamp_s:.3f}")
         parts = [
-            (AXIAL_LOAD, _axial_load(fields, thresholds, rated_load_n)),
-            (JAMMED_ROLLERS, _jammed(fields, thresholds)),
-            (PRECISION_LOSS, _precision(fields, thresholds)),
-            (FATIGUE, _fatigue(fields, thresholds)),
+            (name, (level, message, [*values, stamp]))
+            for name, (level, message, values) in (
+                (AXIAL_LOAD, _axial_load(fields, thresholds, rated_load_n)),
+                (JAMMED_ROLLERS, _jammed(fields, thresholds)),
+                (PRECISION_LOSS, _precision(fields, thresholds)),
+                (FATIGUE, _fatigue(fields, thresholds)),
+            )
         ]
     parts.append((INPUT_HEALTH, _inputs(inputs, thresholds, now_s)))
     parts.append((FILTER_CONSISTENCY, _consistency(fields, events, now_s)))

@@ -126,6 +126,17 @@ def test_load_levels_follow_the_rated_fractions() -> None:
         assert float(values["load_fraction_of_rated"]) == pytest.approx(load)
 
 
+def test_estimator_statuses_name_the_estimate_they_report() -> None:
+    """Each estimator status carries its estimate's stamp to the millisecond, also an epoch
+    stamp (a node behind a backlog of samples reports an estimate older than its clock); the
+    input and consistency statuses, which are about now, do not."""
+    epoch = 1_764_072_000.123
+    reported = statuses(state(stamp_s=epoch))
+    for name in (AXIAL_LOAD, JAMMED_ROLLERS, PRECISION_LOSS, FATIGUE):
+        assert reported[name][2]["estimate_stamp_s"] == "1764072000.123", name
+    assert "estimate_stamp_s" not in reported[INPUT_HEALTH][2]
+
+
 def test_jam_levels_and_message_names_the_count() -> None:
     level, message, values = statuses(state(jam_probabilities=(0.02, 0.98, 0.0)))[JAMMED_ROLLERS]
     assert level == Level.ERROR

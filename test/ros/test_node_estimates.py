@@ -139,11 +139,17 @@ def test_live_estimates_equal_the_offline_ones(run: Run) -> None:
 
 
 def test_jam_appears_in_the_diagnostics(run: Run) -> None:
+    """Judged by the estimate each status reports (its estimate_stamp_s), not by the
+    diagnostics' stamp: on a busy machine the node's sim clock can run ahead of the samples it
+    has estimated, and a status stamped after the jam then still reports an estimate from
+    before it (seen once in CI)."""
     jam = [
-        (d["stamp"], s)
+        (float(s["values"]["estimate_stamp_s"]), s)
         for d in run.diagnostics
         for s in d["status"]
-        if s["name"] == JAMMED_ROLLERS and s["hardware_id"] == HARDWARE_ID
+        if s["name"] == JAMMED_ROLLERS
+        and s["hardware_id"] == HARDWARE_ID
+        and "estimate_stamp_s" in s["values"]
     ]
     before = [s for t, s in jam if t < JAM_AT_S - 0.5]
     after = [s for t, s in jam if t > JAM_AT_S + 1.0]
