@@ -90,21 +90,14 @@ ONE_JAM_SEED = 500
 ONE_JAM_RUNS = 8
 WEAR_PRIOR_SEED = 300
 WEAR_PRIOR_RUNS = 20
-#: Generated runs of the full plan per group: (base seed, scene seeds used from it).
-_DEFAULT_SEEDS = {
-    "two-jam": (TWO_JAM_SEED, TWO_JAM_RUNS),
-    "one-jam": (ONE_JAM_SEED, ONE_JAM_RUNS),
-    "wear-prior": (WEAR_PRIOR_SEED, WEAR_PRIOR_RUNS),
-    "nominal-10min": (LONG_SEEDS["nominal-10min"], 1),
-    "nominal-1h": (LONG_SEEDS["nominal-1h"], 1),
-}
-#: ``--held-out SEED``: each group's base seed is SEED plus this.
-_HELD_OUT_OFFSETS = {
-    "two-jam": 0,
-    "one-jam": 100,
-    "wear-prior": 200,
-    "nominal-10min": 300,
-    "nominal-1h": 301,
+#: Generated groups of the full plan: (base seed, runs drawn from it (scene seeds base,
+#: base + 1, ...), offset of the base from SEED under ``--held-out SEED``).
+_GENERATED = {
+    "two-jam": (TWO_JAM_SEED, TWO_JAM_RUNS, 0),
+    "one-jam": (ONE_JAM_SEED, ONE_JAM_RUNS, 100),
+    "wear-prior": (WEAR_PRIOR_SEED, WEAR_PRIOR_RUNS, 200),
+    "nominal-10min": (LONG_SEEDS["nominal-10min"], 1, 300),
+    "nominal-1h": (LONG_SEEDS["nominal-1h"], 1, 301),
 }
 #: A two-jam run's jams start at least this long before its end (one cycle is 18-25 s).
 JAM_MARGIN_S = 25.0
@@ -296,12 +289,12 @@ def held_out_seeds(seed: int) -> dict[str, int]:
     """The base seed of each generated group for ``--held-out seed``: runs that no tuning on
     the default plan has seen. Refuses a seed whose scene seeds (base + run index) meet any of
     the default plan's, naming the groups."""
-    if isinstance(seed, bool) or not isinstance(seed, int) or seed < 0:
-        raise ValueError(f"--held-out: a seed must be an integer >= 0, got {seed!r}")
-    seeds = {group: seed + offset for group, offset in _HELD_OUT_OFFSETS.items()}
+    if seed < 0:
+        raise ValueError(f"--held-out: a seed must be >= 0, got {seed}")
+    seeds = {group: seed + offset for group, (_, _, offset) in _GENERATED.items()}
     for group, base in seeds.items():
-        runs = range(base, base + _DEFAULT_SEEDS[group][1])
-        for default_group, (default_base, count) in _DEFAULT_SEEDS.items():
+        runs = range(base, base + _GENERATED[group][1])
+        for default_group, (default_base, count, _) in _GENERATED.items():
             default_runs = range(default_base, default_base + count)
             if max(runs.start, default_runs.start) < min(runs.stop, default_runs.stop):
                 raise ValueError(
@@ -316,7 +309,7 @@ def full_plan(bags: Path = DEFAULT_BAGS, *, held_out: int | None = None) -> Plan
     """Every configuration on every scene of issue 6 (about half an hour on 2 cores). With
     ``held_out``, the generated groups are drawn from other seeds (:func:`held_out_seeds`)."""
     seeds = (
-        {group: base for group, (base, _) in _DEFAULT_SEEDS.items()}
+        {group: base for group, (base, _, _) in _GENERATED.items()}
         if held_out is None
         else held_out_seeds(held_out)
     )

@@ -105,7 +105,8 @@ def score(
     """Score ``states`` against ``truth`` (see the module docstring)."""
     if not states or len(truth) == 0:
         raise ValueError("score: no estimates or no truth to compare")
-    stamps, offsets = _on_truth_time(states, truth)
+    offsets = _clock_offsets(states, truth)
+    stamps = on_truth_clock(states, offsets)
 
     def interpolated(values: FloatArray) -> FloatArray:
         return np.asarray(np.interp(stamps, truth.stamp_s, values), dtype=np.float64)
@@ -156,10 +157,9 @@ def score(
     )
 
 
-def _on_truth_time(
-    states: list[HealthState], truth: TruthSamples
-) -> tuple[FloatArray, tuple[float, ...]]:
-    """Estimate stamps on the truth's clock, and the offsets applied after each time reset."""
+def _clock_offsets(states: list[HealthState], truth: TruthSamples) -> tuple[float, ...]:
+    """The offset of each time line after a TIME_RESET that best matches its estimates'
+    screw speed to the truth's (searched within +-MAX_CLOCK_OFFSET_S)."""
     stamps = np.array([s.stamp_s for s in states])
     speed = np.array([s.screw_speed_rad_s for s in states])
     offsets = []
@@ -173,7 +173,7 @@ def _on_truth_time(
             errors = np.mean((truth_speed - speed[segment][None, :]) ** 2, axis=1)
             best = float(candidates[int(np.argmin(errors))])
         offsets.append(best)
-    return on_truth_clock(states, tuple(offsets)), tuple(offsets)
+    return tuple(offsets)
 
 
 def on_truth_clock(states: list[HealthState], offsets_s: tuple[float, ...]) -> FloatArray:
