@@ -38,11 +38,12 @@ averaged away before the ripple could show it.
 
 Why pruning has two floors: a fresh hypothesis below ``filter.min_hypothesis_probability``
 (1e-9) is dropped, an established one only below ``filter.min_established_probability``
-(1e-11). Dropping a fresh one loses nothing: the same jam is born again at the next block with
+(1e-13). Dropping a fresh one loses nothing: the same jam is born again at the next block with
 the same prior. An established one carries its history: after a jam at standstill, "k + 1
 since the standstill" has the load that is right, and while the next stroke starts it loses a
-few nats to k, whose load can follow the new ripple; dropped there, it can only come back as a
-newborn with k's load, which is biased by the jam. The established floor alone (both at 1e-12)
+few nats to k, whose load can follow the new ripple, and in a slow stroke at a small radial load
+some tenths of a nat a block for seconds; dropped there, it can only come back as a newborn
+with k's load, which is biased by the jam. The established floor alone (both at 1e-12)
 keeps every fresh one that lost fewer than ten nats and with it a second Gaussian per count
 most of the time, 30-45 % more time per sample; with the fresh floor where it was, the same
 jams are found sooner at a few per cent (docs/estimation.md, pruning).

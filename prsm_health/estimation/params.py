@@ -184,7 +184,7 @@ class FilterParams:
     divergence_nis: float = 12.0
     divergence_window_s: float = 2.0
     min_hypothesis_probability: float = 1e-9
-    min_established_probability: float = 1e-11
+    min_established_probability: float = 1e-13
     components_per_count: int = 2
     merge_distance_sigmas: float = 3.0
     max_speed_rad_s: float = 0.0
