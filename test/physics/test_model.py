@@ -6,7 +6,7 @@ import math
 
 import numpy as np
 import pytest
-from hypothesis import given, settings
+from hypothesis import example, given, settings
 from hypothesis import strategies as st
 
 from prsm_health.physics.errors import DomainError
@@ -28,6 +28,18 @@ RPM = 2.0 * math.pi / 60.0
     jammed=st.integers(0, 10),
     case=st.sampled_from(list(LoadingCase)),
     theta=st.floats(0.0, 2.0 * math.pi),
+)
+# Found by hypothesis in CI: a radial load of 7.8e-10 N on 6.6 mN of axial load with a tilt
+# stalled the load distribution's Newton (radial loads below 1 mN are now none).
+@example(
+    name="dong2022-downhole",
+    fraction=1.192092896e-07,
+    radial_ratio=1.192092896e-07,
+    tilt=(1.0, 0.0),
+    speed_rpm=0.0,
+    jammed=0,
+    case=LoadingCase.SCREW_TENSION_NUT_COMPRESSION,
+    theta=1.0,
 )
 def test_model_outputs_are_finite_and_nonnegative_or_a_domain_error(
     name: str,
