@@ -80,7 +80,6 @@ NAIVE_SCENES = ("nominal-downhole", "sudden-jam", "radial-misalignment")
 #: Scene groups (``--scenes`` takes a scene name or one of these).
 GROUPS = ("bags", "long", "two-jam", "one-jam", "wear-prior")
 #: Seeds of the generated runs (fixed: the same plan gives the same scenes).
-LONG_SEEDS = {"nominal-10min": 101, "nominal-1h": 102}
 TWO_JAM_SEED = 2026
 #: Two-jam runs of the full plan. The first eight of this seed have no second jam at
 #: standstill, which docs/estimation.md names as not identifiable from the motor current; the
@@ -96,8 +95,8 @@ _GENERATED = {
     "two-jam": (TWO_JAM_SEED, TWO_JAM_RUNS, 0),
     "one-jam": (ONE_JAM_SEED, ONE_JAM_RUNS, 100),
     "wear-prior": (WEAR_PRIOR_SEED, WEAR_PRIOR_RUNS, 200),
-    "nominal-10min": (LONG_SEEDS["nominal-10min"], 1, 300),
-    "nominal-1h": (LONG_SEEDS["nominal-1h"], 1, 301),
+    "nominal-10min": (101, 1, 300),
+    "nominal-1h": (102, 1, 301),
 }
 #: A two-jam run's jams start at least this long before its end (one cycle is 18-25 s).
 JAM_MARGIN_S = 25.0
@@ -315,23 +314,15 @@ def full_plan(bags: Path = DEFAULT_BAGS, *, held_out: int | None = None) -> Plan
     )
     long = [
         BenchScene(
-            "nominal-10min",
+            name,
             "long",
-            _generated(
-                "nominal-10min",
-                "nominal-downhole",
-                duration_s=600.0,
-                seed=seeds["nominal-10min"],
-            ),
-        ),
-        BenchScene(
-            "nominal-1h",
-            "long",
-            _generated(
-                "nominal-1h", "nominal-downhole", duration_s=3600.0, seed=seeds["nominal-1h"]
-            ),
-            configs=("default",),
-        ),
+            _generated(name, "nominal-downhole", duration_s=duration_s, seed=seeds[name]),
+            configs=configs,
+        )
+        for name, duration_s, configs in (
+            ("nominal-10min", 600.0, None),
+            ("nominal-1h", 3600.0, ("default",)),
+        )
     ]
     two_jam = [
         BenchScene(s.name, "two-jam", s)
