@@ -263,8 +263,15 @@ class HealthEstimator:
             self._bank.reinitialise_load(keep_load=True)
         if block.time_reset or hole:
             self._blind_until_s = block.stamp_s + REACQUIRE_S
+        transition = self._load_transition(block)
+        model = self.params.model
         step = self._bank.step(
-            block, jerk_psd=self._jerk_psd(block), evidence=block.stamp_s > self._blind_until_s
+            block,
+            jerk_psd=model.load_jerk_psd_transition_n2_per_s5
+            if transition
+            else model.load_jerk_psd_n2_per_s5,
+            evidence=block.stamp_s > self._blind_until_s,
+            load_transition=transition,
         )
         if self._diverged(block, step):
             self._bank.reinitialise_load()
@@ -282,20 +289,18 @@ class HealthEstimator:
             self._degradation.stop()
         return self._state(block, step, weights, event)
 
-    def _jerk_psd(self, block: Block) -> float:
-        """The load model's jerk density: high while a stroke starts (the traction load builds
-        up as the motion starts), low in steady motion, where a load that follows the
-        carrier-frequency ripple would otherwise hide a jammed roller."""
-        model = self.params.model
+    def _load_transition(self, block: Block) -> bool:
+        """Whether a stroke starts (the first ``model.load_transition_s`` of a direction of
+        motion) or the actuator stands. The load model's jerk density is high there (the
+        traction load builds up as the motion starts) and low in steady motion, where a load
+        that follows the carrier-frequency ripple would otherwise hide a jammed roller."""
         if block.direction != self._direction:
             self._direction = block.direction
             self._direction_since_s = block.stamp_s
-        if (
+        return (
             block.direction == 0
-            or block.stamp_s - self._direction_since_s < model.load_transition_s
-        ):
-            return model.load_jerk_psd_transition_n2_per_s5
-        return model.load_jerk_psd_n2_per_s5
+            or block.stamp_s - self._direction_since_s < self.params.model.load_transition_s
+        )
 
     def _diverged(self, block: Block, step: StepResult) -> bool:
         """Gated for too long, the likeliest load beyond DIVERGED_LOAD_RATIO of the rated

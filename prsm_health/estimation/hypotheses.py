@@ -17,7 +17,10 @@ probability p = 1 - exp(-rate dt) per block, dt its duration but at most
 2. each filter predicts over dt and updates (filterpy ``ExtendedKalmanFilter`` or
    ``UnscentedKalmanFilter``; Joseph-form covariance update in the EKF). A fresh hypothesis
    predicts the block in which its jam starts at a uniformly random instant
-   (:meth:`JamHypotheses._measurement`);
+   (:meth:`JamHypotheses._measurement`). While a stroke starts, an established hypothesis
+   whose ripple phase has been known is updated with its ripple in polar coordinates
+   (:mod:`prsm_health.estimation.phasor`: the phase keeps its uncertainty when the amplitude
+   shrinks as the load builds up);
 3. probabilities times the measurement likelihood N(y; 0, S). At standstill the likelihoods
    are not used: the stiction band carries no evidence about jams.
 
@@ -77,6 +80,7 @@ from prsm_health.estimation.measurement import (
     TorqueModel,
 )
 from prsm_health.estimation.params import EstimatorParams
+from prsm_health.estimation.phasor import PolarPhasor, polar_about
 
 FloatArray = NDArray[np.float64]
 Filter = Any  # filterpy filters carry no type information
@@ -242,6 +246,7 @@ class JamHypotheses:
         initial[LOAD_RATE] = rated**2  # the full load within a second
         initial[LOAD_ACCELERATION] = (10.0 * rated) ** 2  # ... or within a third of a second
         self._ripple = model.ripple
+        self._ekf = params.fidelity.filter != "ukf"
         if self._ripple:
             initial[RIPPLE_COS:] = params.model.ripple_prior_std**2
         self._initial_var = initial
@@ -349,6 +354,20 @@ class JamHypotheses:
         noise[ripple, ripple] = walk
         return noise
 
+    def _polar_noise(self, noise: FloatArray, dt: float) -> FloatArray:
+        """The process noise with the ripple's in polar coordinates: the amplitude walks at
+        ``model.ripple_random_walk_per_sqrt_s``, the phase at
+        ``model.ripple_phase_walk_rad_per_sqrt_s``."""
+        model = self._params.model
+        polar = noise.copy()
+        polar[RIPPLE_COS:, RIPPLE_COS:] = np.diag(
+            [
+                model.ripple_random_walk_per_sqrt_s**2 * dt,
+                model.ripple_phase_walk_rad_per_sqrt_s**2 * dt,
+            ]
+        )
+        return polar
+
     # --- the step -----------------------------------------------------------------------
     def probabilities(self) -> FloatArray:
         """Probability of each jam count 0..N (zeros for pruned counts), summing to 1."""
@@ -424,10 +443,20 @@ class JamHypotheses:
         kept.log_prob, kept.fresh = total, False
         return kept
 
-    def step(self, block: Block, *, jerk_psd: float, evidence: bool = True) -> StepResult:
+    def step(
+        self,
+        block: Block,
+        *,
+        jerk_psd: float,
+        evidence: bool = True,
+        load_transition: bool = False,
+    ) -> StepResult:
         """Merge, predict, update and reweight for one block (see the module docstring).
 
         ``jerk_psd``: the load model's jerk density for this block [N^2/s^5].
+        ``load_transition``: a stroke starts (or the actuator stands): the EKF updates the ripple
+        of a hypothesis whose phase is known in polar coordinates (:mod:`phasor`,
+        :meth:`_polar_noise`).
         ``evidence=False``: the filters update but the probabilities are not reweighted
         (the caller knows the block cannot tell jams from load changes).
         """
@@ -438,23 +467,33 @@ class JamHypotheses:
         priors: list[Prediction] = []
         self._predicted = {}
         z = np.array([block.motor_torque_nm])
+        polars: list[PolarPhasor | None] = []
         for h in self.hypotheses:
             kf = h.filter
             transition, noise = self._process(dt, jerk_psd)
+            polar = None
             if self._ripple and h.count:
                 noise = self._ripple_noise(h, noise, dt, bool(block.direction))
+                if load_transition and h.ripple_axis is not None and self._ekf:
+                    polar = polar_about(kf.x)
+            if polar is not None:
+                kf.x, kf.P = polar.to_polar(kf.x, kf.P)
+                noise = self._polar_noise(noise, dt)
+            polars.append(polar)
             if isinstance(kf, UnscentedKalmanFilter):
                 kf.Q = noise
                 kf.predict(dt=dt, fx=_transition_apply, transition=transition)
             else:
                 kf.F, kf.Q = transition, noise
                 kf.predict()
-            prior, mean, jacobian, variance = self._measurement(kf.x, block, h.count, h.fresh)
+            prior, mean, jacobian, variance = self._measurement(
+                kf.x, block, h.count, h.fresh, polar
+            )
             priors.append(prior)
             if isinstance(kf, UnscentedKalmanFilter):
                 kf.update(z, R=np.array([[variance]]), hx=self._hx(block, h.count, h.fresh))
             else:
-                self._ekf_update(kf, z, block, h, (mean, jacobian, variance))
+                self._ekf_update(kf, z, block, h, (mean, jacobian, variance), polar)
             innovation = float(kf.y[0])
             spread = float(kf.S[0, 0])
             nis.append(innovation**2 / spread)
@@ -465,10 +504,12 @@ class JamHypotheses:
                 h.log_prob += value
         self._normalise()
         predictions = []
-        for h, prior in zip(self.hypotheses, priors, strict=True):
+        for h, prior, polar in zip(self.hypotheses, priors, polars, strict=True):
             kf = h.filter
             if gated:  # no hypothesis explains the block: keep the predicted states
                 kf.x, kf.P = kf.x_prior.copy(), kf.P_prior.copy()
+            if polar is not None:
+                kf.x, kf.P = polar.to_cartesian(kf.x, kf.P)
             kf.P = self._safe_covariance(kf.P)
             # The outputs weigh each prediction by its probability: for a negligible one the
             # prediction before the update serves (it saves a model evaluation per block).
@@ -483,6 +524,7 @@ class JamHypotheses:
         block: Block,
         h: Hypothesis,
         linearised: tuple[float, FloatArray, float],
+        polar: PolarPhasor | None,
     ) -> None:
         """EKF update from the prior, iterated (Gauss-Newton, the iterated EKF) when it moved
         the load by more than LARGE_UPDATE_RATIO of the rated load and the model misses the
@@ -508,13 +550,18 @@ class JamHypotheses:
             moved = abs(float(kf.x[LOAD] - x_prior[LOAD]))
             if iteration == MAX_ITERATIONS or moved <= self._large_update_n:
                 return
-            _, mean, jacobian, variance = self._measurement(kf.x, block, h.count, h.fresh)
+            _, mean, jacobian, variance = self._measurement(kf.x, block, h.count, h.fresh, polar)
             if (float(z[0]) - mean) ** 2 <= ITERATION_SIGMAS**2 * variance:
                 return
             predicted = mean + float(jacobian @ (x_prior - kf.x))
 
     def _measurement(
-        self, x: FloatArray, block: Block, jammed: int, fresh: bool
+        self,
+        x: FloatArray,
+        block: Block,
+        jammed: int,
+        fresh: bool,
+        polar: PolarPhasor | None = None,
     ) -> tuple[Prediction, float, FloatArray, float]:
         """The model's prediction for ``jammed`` rollers, and the measurement's mean, Jacobian
         and variance for the hypothesis.
@@ -523,23 +570,25 @@ class JamHypotheses:
         block mean lies between the two counts' torques: with D their difference, the mean is
         moved by -D / 2 and the variance grows by D^2 / 12. Without this, the block in which
         a jam starts would be explained by the new hypothesis' ripple states and corrupt them.
+
+        ``polar``: ``x`` has its ripple in these polar coordinates, and so has the Jacobian.
         """
-        prediction = self._predict(x, block, jammed)
-        if not fresh:
-            return (
-                prediction,
-                prediction.motor_torque_nm,
-                prediction.jacobian,
-                prediction.variance_nm2,
-            )
-        before = self._predict(x, block, jammed - 1)
-        step = prediction.motor_torque_nm - before.motor_torque_nm
-        return (
-            prediction,
-            prediction.motor_torque_nm - 0.5 * step,
-            0.5 * (prediction.jacobian + before.jacobian),
-            prediction.variance_nm2 + step**2 / 12.0,
+        cartesian = x if polar is None else polar.cartesian_state(x)
+        prediction = self._predict(cartesian, block, jammed)
+        mean, jacobian, variance = (
+            prediction.motor_torque_nm,
+            prediction.jacobian,
+            prediction.variance_nm2,
         )
+        if fresh:
+            before = self._predict(cartesian, block, jammed - 1)
+            step = prediction.motor_torque_nm - before.motor_torque_nm
+            mean -= 0.5 * step
+            jacobian = 0.5 * (jacobian + before.jacobian)
+            variance += step**2 / 12.0
+        if polar is not None:
+            jacobian = polar.polar_jacobian(x, jacobian)
+        return prediction, mean, jacobian, variance
 
     def _predict(self, x: FloatArray, block: Block, jammed: int) -> Prediction:
         """The model's prediction, computed once per state and count in a block: a fresh

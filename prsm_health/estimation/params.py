@@ -103,7 +103,9 @@ class ModelParams:
     known. ripple_phase_walk_per_sqrt_s: its drift across the phasor once the phase is known
     (the phase is set by which rollers are jammed; hypotheses.ripple_walk).
     ripple_phase_known_rad: the phase counts as known when its standard deviation is below
-    this. jam_rate_per_h: prior
+    this. ripple_phase_walk_rad_per_sqrt_s: the phase's drift while a stroke starts, where the
+    ripple of a hypothesis whose phase is known is updated in polar coordinates
+    (estimation/phasor.py). jam_rate_per_h: prior
     rate of a new jam. initial_jammed_rollers: jammed count known at start (after maintenance, 0).
     wear_coefficient_factor: the actuator's wear coefficient relative to the preset's, when
     calibrated (1 = the preset's). wear_coefficient_sigma_ln: log-normal spread of the true
@@ -119,6 +121,7 @@ class ModelParams:
     ripple_random_walk_per_sqrt_s: float = 0.1
     ripple_phase_walk_per_sqrt_s: float = 0.01
     ripple_phase_known_rad: float = 0.5
+    ripple_phase_walk_rad_per_sqrt_s: float = 0.03
     jam_rate_per_h: float = 1e-3
     initial_jammed_rollers: int = 0
     wear_coefficient_factor: float = 1.0
@@ -138,6 +141,7 @@ class ModelParams:
                 "ripple_random_walk_per_sqrt_s": (1e-9, 10.0),
                 "ripple_phase_walk_per_sqrt_s": (1e-9, 10.0),
                 "ripple_phase_known_rad": (1e-6, math.pi),
+                "ripple_phase_walk_rad_per_sqrt_s": (1e-9, 10.0),
                 "jam_rate_per_h": (1e-12, 1e6),
                 "wear_coefficient_factor": (1e-6, 1e6),
                 "wear_coefficient_sigma_ln": (0.0, 5.0),

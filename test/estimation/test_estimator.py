@@ -22,7 +22,7 @@ from prsm_health.estimation.estimate import EstimateEvent, HealthState
 from prsm_health.estimation.estimator import HealthEstimator
 from prsm_health.estimation.metrics import Metrics, score
 from prsm_health.estimation.params import EstimatorParams, Fidelity, FilterParams, ModelParams
-from prsm_health.scenes.scene import scene_from_mapping
+from prsm_health.scenes.scene import Scene, scene_from_mapping
 from prsm_health.scenes.simulator import SimulationChunk, simulate
 from prsm_health.signals import MotorSamples
 
@@ -116,6 +116,22 @@ def test_a_jam_at_standstill_without_ripple_is_not_identifiable() -> None:
     assert 1.3 < float(np.median(ratio)) < 1.45
 
 
+def second_jam_delays(scene: Scene, setting: str, values: tuple[float, ...]) -> list[float | None]:
+    """The second jam's identification delay on ``scene`` with the model's ``setting`` at each
+    of ``values`` (the first jam, in motion, identified at once each time)."""
+    result = simulate(scene)
+    delays = []
+    for value in values:
+        params = params_for(scene, Fidelity())
+        model = dataclasses.replace(params.model, **{setting: value})
+        params = dataclasses.replace(params, model=model)
+        states, _ = chunked(params, result.motor)
+        first, second = scored(states, result.truth, params).jams
+        assert first.delay_s is not None and first.delay_s < 0.5
+        delays.append(second.delay_s)
+    return delays
+
+
 def test_a_second_jam_that_turns_the_ripple_is_identified() -> None:
     """two-jam-8 of the benchmark: roller 9 seizes in steady motion at 16 kN, 11 s after
     roller 1, while the wall's radial load falls from 7 to 3 kN. With its phase known, the
@@ -123,19 +139,28 @@ def test_a_second_jam_that_turns_the_ripple_is_identified() -> None:
     second roller turns it, and count 2 becomes the most likely within a second. With the
     ripple free to turn (the phase walk as fast as the amplitude walk), count 1 follows with
     its ripple and load and the jam is never identified (docs/estimation.md)."""
-    scene = two_jam_scenes(8)[7]
-    result = simulate(scene)
-    delays = []
-    for phase_walk in (ModelParams().ripple_phase_walk_per_sqrt_s, 0.1):
-        params = params_for(scene, Fidelity())
-        model = dataclasses.replace(params.model, ripple_phase_walk_per_sqrt_s=phase_walk)
-        params = dataclasses.replace(params, model=model)
-        states, _ = chunked(params, result.motor)
-        first, second = scored(states, result.truth, params).jams
-        assert first.delay_s is not None and first.delay_s < 0.5
-        delays.append(second.delay_s)
-    identified, missed = delays
+    walk = "ripple_phase_walk_per_sqrt_s"
+    identified, missed = second_jam_delays(
+        two_jam_scenes(8)[7], walk, (getattr(ModelParams(), walk), 0.1)
+    )
     assert identified is not None and identified < 2.0
+    assert missed is None
+
+
+def test_a_second_jam_at_standstill_that_turns_the_ripple_is_identified() -> None:
+    """two-jam-13 of the benchmark: roller 10 seizes in motion, roller 4 at standstill 18.7 s
+    later; their ripple is turned by 72 degrees. While the next stroke's load builds up, count 1
+    could shrink its ripple's amplitude and turn its phase in (c, s) at the cost of an absolute
+    move across the phasor; updated in polar coordinates there, its phase keeps its own
+    uncertainty and count 2 is identified within the cycle. With the phase walking ten times
+    faster, count 1 turns and the jam is missed (docs/estimation.md, "Polar updates while a
+    stroke starts")."""
+    scene = two_jam_scenes(13)[12]
+    cycle_s = cycle_period_s(scene)
+    assert cycle_s is not None
+    walk = "ripple_phase_walk_rad_per_sqrt_s"
+    identified, missed = second_jam_delays(scene, walk, (getattr(ModelParams(), walk), 0.3))
+    assert identified is not None and identified < cycle_s
     assert missed is None
 
 

@@ -222,8 +222,13 @@ def _soak_bank(fidelity: Fidelity, updates: int, seed: int) -> Extremes:
             block = _adversarial(rng, stamp, block)
         if rng.random() < 0.005:  # what the estimator does after a time reset or a hole
             bank.reinitialise_load(keep_load=bool(rng.random() < 0.5))
-        jerk = 5e12 if rng.random() < 0.3 else 5e11
-        result = bank.step(block, jerk_psd=jerk, evidence=bool(rng.random() < 0.95))
+        transition = bool(rng.random() < 0.3)  # a stroke start: polar ripple updates
+        result = bank.step(
+            block,
+            jerk_psd=5e12 if transition else 5e11,
+            evidence=bool(rng.random() < 0.95),
+            load_transition=transition,
+        )
         stamp += block.duration_s
         assert len(result.predictions) == len(bank.hypotheses)
         assert all(math.isfinite(v) and v >= 0.0 for v in result.nis)
