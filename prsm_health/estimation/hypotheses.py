@@ -455,8 +455,8 @@ class JamHypotheses:
 
         ``jerk_psd``: the load model's jerk density for this block [N^2/s^5].
         ``load_transition``: a stroke starts (or the actuator stands): the EKF updates the ripple
-        of a hypothesis whose phase is known in polar coordinates (:mod:`phasor`,
-        :meth:`_polar_noise`).
+        of a hypothesis whose phase has been known (its ripple axis is set) in polar
+        coordinates (:mod:`prsm_health.estimation.phasor`, :meth:`_polar_noise`).
         ``evidence=False``: the filters update but the probabilities are not reweighted
         (the caller knows the block cannot tell jams from load changes).
         """
