@@ -74,8 +74,7 @@ from prsm_health.estimation.measurement import (
     LOAD_ACCELERATION,
     LOAD_RATE,
     LOAD_STATES,
-    RIPPLE_COS,
-    RIPPLE_SIN,
+    RIPPLE,
     Prediction,
     TorqueModel,
 )
@@ -154,32 +153,25 @@ def repair_covariance(matrix: FloatArray, floor: FloatArray | None = None) -> Fl
     return np.asarray(repaired * np.outer(scale, scale), dtype=np.float64)
 
 
-def ripple_walk(
+def ripple_axis(
     ripple: FloatArray,
     covariance: FloatArray,
     axis: FloatArray | None,
     *,
     moving: bool,
-    dt: float,
-    along_per_sqrt_s: float,
-    across_per_sqrt_s: float,
     phase_known_rad: float,
-) -> tuple[FloatArray, FloatArray | None]:
-    """Process noise of the ripple phasor r = (c, s) over ``dt``, and the axis it walks along.
+) -> FloatArray | None:
+    """The axis u = r / |r| the ripple phasor r = (c, s) walks along (:func:`ripple_walk`), or
+    None while its phase has never been known.
 
     A jammed roller's ripple is the first carrier harmonic of its sliding torque: its amplitude
     follows the radial load (0.53 N m per kN on dong2022-downhole, whatever the axial load), its
     phase is set by where the jammed rollers sit on the carrier and does not change
-    (docs/estimation.md). Once the phase is known (in motion, its standard deviation
-    sqrt(v' P v) / |r|^2 below ``phase_known_rad``, v = (-s, c) the direction across r) the
-    phasor walks along its axis u = r / |r| and hardly across it:
-
-        Q = dt (along^2 u u' + across^2 (I - u u'));
-
-    before that, at ``along_per_sqrt_s`` in every direction. The axis is refreshed while the
-    phase is known and kept when it no longer is: the amplitude may shrink through zero with the
-    radial load, and must not turn the phase on the way (a second jammed roller does turn it).
-    Returns Q (2 x 2) and the axis (None while the phase has never been known).
+    (docs/estimation.md). The phase is known in motion when its standard deviation
+    sqrt(v' P v) / |r|^2 is below ``phase_known_rad``, v = (-s, c) the direction across r. The
+    axis is refreshed while the phase is known and kept when it no longer is: the amplitude
+    may shrink through zero with the radial load, and must not turn the phase on the way (a
+    second jammed roller does turn it).
     """
     c, s = float(ripple[0]), float(ripple[1])
     amplitude2 = c * c + s * s
@@ -187,26 +179,38 @@ def ripple_walk(
         (pcc, pcs), (psc, pss) = covariance.tolist()
         across_var = s * s * pcc - c * s * (pcs + psc) + c * c * pss
         if across_var < phase_known_rad**2 * amplitude2**2:
-            axis = np.array([c, s]) / math.sqrt(amplitude2)
+            return np.array([c, s]) / math.sqrt(amplitude2)
+    return axis
+
+
+def ripple_walk(
+    axis: FloatArray | None, *, dt: float, along_per_sqrt_s: float, across_per_sqrt_s: float
+) -> FloatArray:
+    """Process noise of the ripple phasor over ``dt`` (2 x 2): once its phase is known (``axis``
+    u, :func:`ripple_axis`) the phasor walks along its axis and hardly across it,
+
+        Q = dt (along^2 u u' + across^2 (I - u u')),
+
+    before that (``axis`` None) at ``along_per_sqrt_s`` in every direction.
+    """
     along2 = along_per_sqrt_s**2 * dt
     if axis is None:
-        return np.array([[along2, 0.0], [0.0, along2]]), None
+        return np.array([[along2, 0.0], [0.0, along2]])
     # dt (along^2 u u' + across^2 (I - u u')) = across2 I + (along2 - across2) u u'
     across2 = across_per_sqrt_s**2 * dt
     ux, uy = axis.tolist()
     extra = along2 - across2
     off_diagonal = extra * ux * uy
-    walk = np.array(
+    return np.array(
         [[across2 + extra * ux * ux, off_diagonal], [off_diagonal, across2 + extra * uy * uy]]
     )
-    return walk, axis
 
 
 @dataclass
 class Hypothesis:
     """One hypothesis: the jam count, its filter, its log probability, whether it is fresh
     (the jam started in the current block), and the axis its ripple phasor walks along once
-    its phase is known (:func:`ripple_walk`; None before)."""
+    its phase is known (:func:`ripple_axis`; None before)."""
 
     count: int
     filter: Filter
@@ -248,12 +252,12 @@ class JamHypotheses:
         self._ripple = model.ripple
         self._ekf = params.fidelity.filter != "ukf"
         if self._ripple:
-            initial[RIPPLE_COS:] = params.model.ripple_prior_std**2
+            initial[RIPPLE] = params.model.ripple_prior_std**2
         self._initial_var = initial
         self._floor = initial * VARIANCE_FLOOR_RATIO
         self._jump_cov = np.zeros((self._dim, self._dim))
         if self._ripple:
-            self._jump_cov[RIPPLE_COS:, RIPPLE_COS:] = np.eye(2) * params.model.ripple_prior_std**2
+            self._jump_cov[RIPPLE, RIPPLE] = np.eye(2) * params.model.ripple_prior_std**2
         self._spare_filters: list[Filter] = []
         self._predicted: dict[tuple[bytes, int], Prediction] = {}
         self._process_cache: tuple[object, tuple[FloatArray, FloatArray]] = (
@@ -279,9 +283,8 @@ class JamHypotheses:
         best = self.most_likely().filter
         x, p = best.x.copy(), best.P.copy()
         if self._ripple:
-            ripple = slice(RIPPLE_COS, RIPPLE_SIN + 1)
-            x[ripple] = 0.0
-            self._forget(p, ripple)
+            x[RIPPLE] = 0.0
+            self._forget(p, RIPPLE)
         self._start(count, x, p)
 
     def _forget(self, p: FloatArray, states: slice) -> None:
@@ -333,25 +336,17 @@ class JamHypotheses:
             self._process_cache = (key, (transition, noise))
         return self._process_cache[1]
 
-    def _ripple_noise(
-        self, h: Hypothesis, load_noise: FloatArray, dt: float, moving: bool
-    ) -> FloatArray:
-        """The process noise of a jammed hypothesis: the load's and its ripple's
-        (:func:`ripple_walk`, which also updates the hypothesis' ripple axis)."""
+    def _ripple_noise(self, h: Hypothesis, load_noise: FloatArray, dt: float) -> FloatArray:
+        """The process noise of a jammed hypothesis: the load's and its ripple's walk along the
+        hypothesis' axis (:func:`ripple_walk`)."""
         model = self._params.model
-        ripple = slice(RIPPLE_COS, RIPPLE_SIN + 1)
-        walk, h.ripple_axis = ripple_walk(
-            h.filter.x[ripple],
-            h.filter.P[ripple, ripple],
+        noise = load_noise.copy()
+        noise[RIPPLE, RIPPLE] = ripple_walk(
             h.ripple_axis,
-            moving=moving,
             dt=dt,
             along_per_sqrt_s=model.ripple_random_walk_per_sqrt_s,
             across_per_sqrt_s=model.ripple_phase_walk_per_sqrt_s,
-            phase_known_rad=model.ripple_phase_known_rad,
         )
-        noise = load_noise.copy()
-        noise[ripple, ripple] = walk
         return noise
 
     def _polar_noise(self, noise: FloatArray, dt: float) -> FloatArray:
@@ -360,7 +355,7 @@ class JamHypotheses:
         ``model.ripple_phase_walk_rad_per_sqrt_s``."""
         model = self._params.model
         polar = noise.copy()
-        polar[RIPPLE_COS:, RIPPLE_COS:] = np.diag(
+        polar[RIPPLE, RIPPLE] = np.diag(
             [
                 model.ripple_random_walk_per_sqrt_s**2 * dt,
                 model.ripple_phase_walk_rad_per_sqrt_s**2 * dt,
@@ -473,12 +468,20 @@ class JamHypotheses:
             transition, noise = self._process(dt, jerk_psd)
             polar = None
             if self._ripple and h.count:
-                noise = self._ripple_noise(h, noise, dt, bool(block.direction))
+                h.ripple_axis = ripple_axis(
+                    kf.x[RIPPLE],
+                    kf.P[RIPPLE, RIPPLE],
+                    h.ripple_axis,
+                    moving=bool(block.direction),
+                    phase_known_rad=self._params.model.ripple_phase_known_rad,
+                )
                 if load_transition and h.ripple_axis is not None and self._ekf:
                     polar = polar_about(kf.x)
-            if polar is not None:
-                kf.x, kf.P = polar.to_polar(kf.x, kf.P)
-                noise = self._polar_noise(noise, dt)
+                if polar is None:
+                    noise = self._ripple_noise(h, noise, dt)
+                else:
+                    kf.x, kf.P = polar.to_polar(kf.x, kf.P)
+                    noise = self._polar_noise(noise, dt)
             polars.append(polar)
             if isinstance(kf, UnscentedKalmanFilter):
                 kf.Q = noise

@@ -46,6 +46,8 @@ FloatArray = NDArray[np.float64]
 #: State layout: the load and its first two derivatives, then the ripple (when modelled).
 LOAD, LOAD_RATE, LOAD_ACCELERATION, RIPPLE_COS, RIPPLE_SIN = range(5)
 LOAD_STATES = 3
+#: The ripple phasor (c, s) in the state.
+RIPPLE = slice(RIPPLE_COS, RIPPLE_SIN + 1)
 
 #: The ripple grows with the load up to this fraction of the rated load and stays at its size
 #: beyond: a jammed roller's ripple comes from the radial load (the borehole wall, 000) or the

@@ -26,15 +26,13 @@ import math
 import numpy as np
 from numpy.typing import NDArray
 
-from prsm_health.estimation.measurement import RIPPLE_COS, RIPPLE_SIN
+from prsm_health.estimation.measurement import RIPPLE, RIPPLE_COS, RIPPLE_SIN
 
 FloatArray = NDArray[np.float64]
 
 #: Smallest amplitude (relative ripple) taken into polar coordinates: below it the phase is
 #: not defined by the phasor.
 SMALLEST_AMPLITUDE = 1e-6
-
-RIPPLE = slice(RIPPLE_COS, RIPPLE_SIN + 1)
 
 
 def polar_about(x: FloatArray) -> PolarPhasor | None:

@@ -15,11 +15,12 @@ from prsm_health.estimation.hypotheses import (
     Hypothesis,
     JamHypotheses,
     repair_covariance,
+    ripple_axis,
     ripple_walk,
     safe_sqrt,
 )
 from prsm_health.estimation.inputs import Block
-from prsm_health.estimation.measurement import LOAD, RIPPLE_COS, RIPPLE_SIN, TorqueModel
+from prsm_health.estimation.measurement import LOAD, RIPPLE, RIPPLE_COS, TorqueModel
 from prsm_health.estimation.params import EstimatorParams, Fidelity, ModelParams
 from prsm_health.physics.presets import load_preset
 
@@ -267,15 +268,16 @@ def test_a_large_update_is_iterated_until_the_model_meets_the_measurement(
         assert miss_sigmas > 2.0 * hypotheses.ITERATION_SIGMAS
 
 
-WALK = {"along_per_sqrt_s": 0.1, "across_per_sqrt_s": 0.01, "phase_known_rad": 0.5}
+WALK = {"along_per_sqrt_s": 0.1, "across_per_sqrt_s": 0.01}
+PHASE_KNOWN = 0.5
 
 
 def test_a_ripple_of_unknown_phase_walks_in_every_direction() -> None:
     """Phase std about 1 rad (perpendicular std 0.3 on an amplitude of 0.3): isotropic."""
     ripple = np.array([0.3, 0.0])
-    q, axis = ripple_walk(ripple, np.eye(2) * 0.09, None, moving=True, dt=0.04, **WALK)
+    axis = ripple_axis(ripple, np.eye(2) * 0.09, None, moving=True, phase_known_rad=PHASE_KNOWN)
     assert axis is None
-    np.testing.assert_allclose(q, np.eye(2) * 0.1**2 * 0.04)
+    np.testing.assert_allclose(ripple_walk(axis, dt=0.04, **WALK), np.eye(2) * 0.1**2 * 0.04)
 
 
 def test_a_ripple_of_known_phase_walks_along_its_phasor_only() -> None:
@@ -283,9 +285,10 @@ def test_a_ripple_of_known_phase_walks_along_its_phasor_only() -> None:
     phasor), the phase hardly moves (0.01/sqrt(s) across it)."""
     ripple = np.array([0.3, 0.4])  # amplitude 0.5
     covariance = np.eye(2) * 0.05**2
-    q, axis = ripple_walk(ripple, covariance, None, moving=True, dt=0.04, **WALK)
+    axis = ripple_axis(ripple, covariance, None, moving=True, phase_known_rad=PHASE_KNOWN)
     assert axis is not None
     np.testing.assert_allclose(axis, [0.6, 0.8])
+    q = ripple_walk(axis, dt=0.04, **WALK)
     across = np.array([-0.8, 0.6])
     assert float(axis @ q @ axis) == pytest.approx(0.1**2 * 0.04)
     assert float(across @ q @ across) == pytest.approx(0.01**2 * 0.04)
@@ -300,11 +303,11 @@ def test_the_phase_is_judged_across_the_phasor_with_its_correlations() -> None:
     ripple = np.array([0.3, 0.4])
     u, v = np.array([0.6, 0.8]), np.array([-0.8, 0.6])
     correlated = 0.7**2 * np.outer(u, u) + 0.05**2 * np.outer(v, v)
-    _, axis = ripple_walk(ripple, correlated, None, moving=True, dt=0.04, **WALK)
+    axis = ripple_axis(ripple, correlated, None, moving=True, phase_known_rad=PHASE_KNOWN)
     assert axis is not None
     np.testing.assert_allclose(axis, u)
     uncorrelated = np.diag(np.diagonal(correlated))
-    _, none = ripple_walk(ripple, uncorrelated, None, moving=True, dt=0.04, **WALK)
+    none = ripple_axis(ripple, uncorrelated, None, moving=True, phase_known_rad=PHASE_KNOWN)
     assert none is None
 
 
@@ -313,11 +316,12 @@ def test_the_ripple_axis_is_kept_when_the_amplitude_shrinks_and_not_set_at_stand
     phase, but keeps its axis: it cannot turn by passing through zero. At standstill the
     carrier does not turn, so no axis is learned there."""
     known = np.eye(2) * 0.05**2
-    _, axis = ripple_walk(np.array([0.5, 0.0]), known, None, moving=True, dt=0.04, **WALK)
-    q, kept = ripple_walk(np.array([0.01, 0.0]), known, axis, moving=True, dt=0.04, **WALK)
+    axis = ripple_axis(np.array([0.5, 0.0]), known, None, moving=True, phase_known_rad=PHASE_KNOWN)
+    kept = ripple_axis(np.array([0.01, 0.0]), known, axis, moving=True, phase_known_rad=PHASE_KNOWN)
     assert kept is axis
+    q = ripple_walk(kept, dt=0.04, **WALK)
     assert float(np.array([0.0, 1.0]) @ q @ np.array([0.0, 1.0])) == pytest.approx(0.01**2 * 0.04)
-    _, none = ripple_walk(np.array([0.5, 0.0]), known, None, moving=False, dt=0.5, **WALK)
+    none = ripple_axis(np.array([0.5, 0.0]), known, None, moving=False, phase_known_rad=PHASE_KNOWN)
     assert none is None
 
 
@@ -328,15 +332,14 @@ def test_a_new_jammed_roller_adds_the_ripple_prior_to_its_parents_ripple() -> No
     docs/estimation.md "Load model")."""
     p = EstimatorParams(actuator=Actuator(preset=PRESET), model=ModelParams(jam_rate_per_h=3600.0))
     bank = JamHypotheses(p, TorqueModel(p))
-    ripple = slice(RIPPLE_COS, RIPPLE_SIN + 1)
     prior = p.model.ripple_prior_std**2
     dim = bank.hypotheses[0].filter.dim_x
     one = np.eye(dim) * 4.0
-    one[ripple, ripple] = [[0.5, 0.1], [0.1, 0.3]]
+    one[RIPPLE, RIPPLE] = [[0.5, 0.1], [0.1, 0.3]]
     bank.hypotheses.append(Hypothesis(1, bank._new_filter(np.zeros(dim), one), math.log(0.5)))
     bank.hypotheses[0].log_prob = math.log(0.5)
     healthy = bank.hypotheses[0].filter.P.copy()
-    np.testing.assert_array_equal(healthy[ripple, ripple], prior * np.eye(2))
+    np.testing.assert_array_equal(healthy[RIPPLE, RIPPLE], prior * np.eye(2))
     bank._merge(0.04)
     born = {h.count: h.filter.P for h in bank.hypotheses if h.fresh}
     added = np.diag([0.0] * RIPPLE_COS + [prior, prior])

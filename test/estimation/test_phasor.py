@@ -6,10 +6,8 @@ import math
 
 import numpy as np
 
-from prsm_health.estimation.measurement import RIPPLE_COS, RIPPLE_SIN
+from prsm_health.estimation.measurement import RIPPLE, RIPPLE_COS, RIPPLE_SIN
 from prsm_health.estimation.phasor import SMALLEST_AMPLITUDE, polar_about
-
-RIPPLE = slice(RIPPLE_COS, RIPPLE_SIN + 1)
 
 
 def state(c: float, s: float) -> tuple[np.ndarray, np.ndarray]:
