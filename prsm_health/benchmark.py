@@ -53,7 +53,7 @@ from prsm_health.estimation.params import (
     EstimatorParams,
     Fidelity,
     bundled_params_file,
-    params_from_mapping,
+    load_params,
 )
 from prsm_health.replay import CHUNK_SAMPLES, replay
 from prsm_health.scenes.profiles import DownholeCycle
@@ -264,6 +264,8 @@ class Plan:
     naive_seconds: the excerpt. repeats: runs of the default replay and of the decode
     baseline per bag (the best counts). wear_bag: the accelerated-wear bag for the run with
     the true wear factor (None: not run). wear_prior: its runs (default configuration).
+    params_file: the estimator parameters every run starts from (None: the bundled
+    config/default.yaml); each scene's actuator replaces the file's (:func:`params_for`).
     """
 
     mode: str
@@ -275,6 +277,7 @@ class Plan:
     repeats: int
     wear_bag: Path | None
     wear_prior: tuple[Scene, ...]
+    params_file: Path | None = None
 
 
 def _bag_scenes(bags: Path, names: Iterable[str]) -> list[BenchScene]:
@@ -564,17 +567,22 @@ class BenchResults:
         return [r for r in self.runs if r.kind == kind and config in (None, r.config)]
 
 
-def base_params() -> EstimatorParams:
-    """The bundled estimator parameters (config/default.yaml)."""
-    return params_from_mapping(load_yaml_mapping(bundled_params_file()))
+def base_params(path: Path | None = None) -> EstimatorParams:
+    """The estimator parameters of ``path``, or the bundled ones (config/default.yaml)."""
+    return load_params(path if path is not None else bundled_params_file())
 
 
 def params_for(
-    scene: Scene, fidelity: Fidelity, *, wear_factor: float | None = None
+    scene: Scene,
+    fidelity: Fidelity,
+    *,
+    base: EstimatorParams | None = None,
+    wear_factor: float | None = None,
 ) -> EstimatorParams:
-    """The bundled parameters with the scene's actuator (as ``prsm-health replay`` takes a
-    bundled scene's) and ``fidelity``; optionally a calibrated wear-coefficient factor."""
-    params = base_params()
+    """``base`` (default: the bundled parameters) with the scene's actuator (as ``prsm-health
+    replay`` takes a bundled scene's) and ``fidelity``; optionally a calibrated
+    wear-coefficient factor."""
+    params = base if base is not None else base_params()
     model = params.model
     if wear_factor is not None:
         model = dataclasses.replace(model, wear_coefficient_factor=wear_factor)
@@ -588,15 +596,17 @@ def _effective(params: EstimatorParams) -> tuple[Any, ...]:
     return tuple(sorted(values.items()))
 
 
-def skipped_configurations(configs: Iterable[Configuration]) -> dict[str, str]:
-    """Configurations that act exactly like the default with the bundled parameters
-    (``radial-on`` while "auto" resolves to on), with the reason."""
+def skipped_configurations(
+    configs: Iterable[Configuration], base: EstimatorParams | None = None
+) -> dict[str, str]:
+    """Configurations that act exactly like the default with ``base`` (default: the bundled
+    parameters; ``radial-on`` while "auto" resolves to on), with the reason."""
     scene = scene_from_mapping(_bundled_mapping("nominal-downhole"))
-    default = _effective(params_for(scene, Fidelity()))
+    default = _effective(params_for(scene, Fidelity(), base=base))
     return {
         c.name: "acts exactly as default (radial_terms auto resolves to the same)"
         for c in configs
-        if c.name != "default" and _effective(params_for(scene, c.fidelity)) == default
+        if c.name != "default" and _effective(params_for(scene, c.fidelity, base=base)) == default
     }
 
 
@@ -753,7 +763,8 @@ class _Bench:
     def __init__(self, plan: Plan, progress: Callable[[str], None]) -> None:
         self.plan = plan
         self.progress = progress
-        self.skipped = skipped_configurations(plan.configs)
+        self.base = base_params(plan.params_file)
+        self.skipped = skipped_configurations(plan.configs, self.base)
         self.configs = [c for c in plan.configs if c.name not in self.skipped]
         self.runs: list[Run] = []
         self.onsets: list[JamOnset] = []
@@ -767,7 +778,7 @@ class _Bench:
         truth: TruthSamples,
         decode_s: float | None,
     ) -> Run:
-        params = params_for(scene.scene, config.fidelity)
+        params = params_for(scene.scene, config.fidelity, base=self.base)
         if scene.bag is not None:
             repeats = self.plan.repeats if config.name == "default" else 1
             results = [replay(scene.bag, params) for _ in range(repeats)]
@@ -783,14 +794,14 @@ class _Bench:
     def _excerpt_run(
         self, scene: BenchScene, config: Configuration, samples: MotorSamples, truth: TruthSamples
     ) -> Run:
-        params = params_for(scene.scene, config.fidelity)
+        params = params_for(scene.scene, config.fidelity, base=self.base)
         durations, states = one_at_a_time(params, samples, keep=True)
         return _run(scene, config, "excerpt", params, len(samples), states, truth, durations)
 
     def _told_count_run(
         self, scene: BenchScene, samples: MotorSamples, truth: TruthSamples
     ) -> ToldCountRun:
-        params = params_for(scene.scene, Fidelity())
+        params = params_for(scene.scene, Fidelity(), base=self.base)
         metrics = scored(told_count(params, samples, truth), truth, params)
         largest = params.actuator.preset.largest_axial_load_n
         return ToldCountRun(scene.name, scene.group, metrics, largest)
@@ -834,7 +845,7 @@ class _Bench:
         truth = _truth(bag)
         factor = float(truth.wear_coefficient_factor[0])
         scene = scene_from_mapping(_bundled_mapping(bag.name))
-        params = params_for(scene, Fidelity(), wear_factor=factor)
+        params = params_for(scene, Fidelity(), base=self.base, wear_factor=factor)
         return _wear_run(
             bag.name, factor, factor, scored(replay(bag, params).states, truth, params)
         )
@@ -844,7 +855,7 @@ class _Bench:
         found = []
         for scene in scenes:
             result = simulate(scene)
-            params = params_for(scene, Fidelity())
+            params = params_for(scene, Fidelity(), base=self.base)
             states, _ = chunked(params, result.motor)
             metrics = scored(states, result.truth, params)
             factor = float(result.truth.wear_coefficient_factor[0])
@@ -930,6 +941,7 @@ def run_benchmark(plan: Plan, *, progress: Callable[[str], None] = LOG.info) -> 
             "naive_scenes": list(plan.naive_scenes),
             "naive_seconds": plan.naive_seconds,
             "repeats": plan.repeats,
+            "params_file": str(plan.params_file or bundled_params_file()),
             "scenes": [
                 {
                     "name": s.name,

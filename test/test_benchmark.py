@@ -389,6 +389,50 @@ def test_cli_refuses_unknown_configurations(capsys: pytest.CaptureFixture[str]) 
     assert "unknown fast" in capsys.readouterr().err
 
 
+def test_a_plan_runs_with_the_parameters_of_its_file(tmp_path: Path) -> None:
+    """--params: every run starts from the file's parameters (the scene's actuator kept). The
+    wear factor only scales the integrated precision loss, so a file with twice the bundled
+    factor doubles it and changes nothing else."""
+    scene = scene_from_mapping(downhole(name="tiny-params", duration_s=4.0))
+    plan = Plan(
+        mode="test",
+        scenes=(BenchScene("tiny-params", "two-jam", scene),),
+        configs=(BY_NAME["default"],),
+        timing_samples=100,
+        naive_scenes=(),
+        naive_seconds=0.0,
+        repeats=1,
+        wear_bag=None,
+        wear_prior=(),
+    )
+    params_file = tmp_path / "params.yaml"
+    params_file.write_text(
+        "actuator: {preset: li2020-jamming}\nmodel: {wear_coefficient_factor: 2.0}\n"
+    )
+    bundled, doubled = (
+        run_benchmark(dataclasses.replace(plan, params_file=path), progress=lambda _: None)
+        for path in (None, params_file)
+    )
+    assert bundled.plan["params_file"].endswith("default.yaml")
+    assert doubled.plan["params_file"] == str(params_file)
+    (before,), (after,) = bundled.runs_of(), doubled.runs_of()
+    assert after.metrics.load_rmse_n == before.metrics.load_rmse_n  # dong2022-downhole both
+    assert after.metrics.precision_loss_final_m == pytest.approx(
+        2.0 * before.metrics.precision_loss_final_m, rel=1e-9
+    )
+
+
+def test_cli_names_an_invalid_parameter_file(
+    tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    bad = tmp_path / "bad.yaml"
+    bad.write_text("actuator: {preset: dong2022-downhole}\nmodel: {jam_rate_per_h: -1}\n")
+    assert main(["bench", "--params", str(bad), "--scenes", "two-jam-1", "--out", "unused"]) == 2
+    error = capsys.readouterr().err
+    assert f"--params {bad}" in error and "jam_rate_per_h" in error
+    assert not Path("unused").exists()
+
+
 def test_every_configuration_has_its_own_pareto_style() -> None:
     """Points that nearly coincide (default and no-skip-standstill) are told apart by colour
     and marker in the legend, so no two configurations may share both."""
