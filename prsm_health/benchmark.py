@@ -36,7 +36,7 @@ import math
 import os
 import platform
 import time
-from collections.abc import Callable, Iterable, Iterator
+from collections.abc import Callable, Iterable, Iterator, Sequence
 from dataclasses import dataclass, field, fields
 from importlib import resources
 from pathlib import Path
@@ -48,6 +48,7 @@ from numpy.typing import NDArray
 from prsm_health.bags import InputTopics, decode_baseline, read_motor_samples, read_truth
 from prsm_health.estimation.estimate import HealthState
 from prsm_health.estimation.estimator import HealthEstimator
+from prsm_health.estimation.evidence import onset_evidence
 from prsm_health.estimation.metrics import MOVING_FRACTION, Metrics, score
 from prsm_health.estimation.params import (
     EstimatorParams,
@@ -494,6 +495,9 @@ class JamOnset:
     ripple_turn_deg: how far the onset turns that ripple's phase; None for a first jam or where
     the ripple before or after is zero (no phase to turn). The ripple is the only signal in the
     motor current that tells k from k + 1 jammed rollers (docs/estimation.md).
+    evidence_nats: the log-likelihood ratio for this jam within one cycle of its onset under
+    the default configuration's model (:func:`~prsm_health.estimation.evidence.onset_evidence`);
+    None where not measured (no cycle).
     """
 
     scene: str
@@ -505,6 +509,7 @@ class JamOnset:
     cycle_s: float | None
     ripple_after: float
     ripple_turn_deg: float | None
+    evidence_nats: float | None = None
 
     @property
     def ripple_cancelled(self) -> bool:
@@ -728,13 +733,20 @@ def ripple_change(before: complex, after: complex) -> tuple[float, float | None]
 
 
 def jam_onsets(
-    run: Run, truth: TruthSamples, cycle_s: float | None, params: EstimatorParams
+    run: Run,
+    truth: TruthSamples,
+    cycle_s: float | None,
+    params: EstimatorParams,
+    evidence: Sequence[float] | None = None,
 ) -> list[JamOnset]:
     """The run's true jam onsets with their category, the ripple change they make (from the
-    truth's jammed rollers) and their detection delay."""
+    truth's jammed rollers), their detection delay and, if given, the evidence for each
+    (:func:`onsets_evidence`, in the order of the truth's onsets)."""
     moving = MOVING_FRACTION * params.actuator.preset.largest_speed_rpm * RPM_TO_RAD_S
+    if evidence is not None and len(evidence) != len(run.metrics.jams):
+        raise ValueError(f"evidence: {len(evidence)} values for {len(run.metrics.jams)} onsets")
     onsets = []
-    for jam in run.metrics.jams:
+    for i, jam in enumerate(run.metrics.jams):
         # The onset is the stamp of the truth's first sample with the new count (never the first).
         after = int(np.searchsorted(truth.stamp_s, jam.onset_s))
         ripple_after, turn = ripple_change(
@@ -751,9 +763,25 @@ def jam_onsets(
                 cycle_s=cycle_s,
                 ripple_after=ripple_after,
                 ripple_turn_deg=turn,
+                evidence_nats=None if evidence is None else evidence[i],
             )
         )
     return onsets
+
+
+def onsets_evidence(
+    params: EstimatorParams, samples: MotorSamples, truth: TruthSamples, cycle_s: float
+) -> list[float]:
+    """:func:`~prsm_health.estimation.evidence.onset_evidence` of each of the truth's onsets
+    within one cycle."""
+    onsets = truth.jam_onsets
+    return onset_evidence(
+        params,
+        samples,
+        truth.stamp_s[onsets].tolist(),
+        truth.jammed_rollers[onsets].tolist(),
+        window_s=cycle_s,
+    )
 
 
 # --- running --------------------------------------------------------------------------------
@@ -777,6 +805,7 @@ class _Bench:
         samples: MotorSamples,
         truth: TruthSamples,
         decode_s: float | None,
+        evidence: list[float] | None,
     ) -> Run:
         params = params_for(scene.scene, config.fidelity, base=self.base)
         if scene.bag is not None:
@@ -788,7 +817,7 @@ class _Bench:
         durations, _ = one_at_a_time(params, samples[: self.plan.timing_samples])
         run = _run(scene, config, "full", params, len(samples), states, truth, durations)
         run = dataclasses.replace(run, chunked_s=elapsed, decode_s=decode_s)
-        self.onsets += jam_onsets(run, truth, cycle_period_s(scene.scene), params)
+        self.onsets += jam_onsets(run, truth, cycle_period_s(scene.scene), params, evidence)
         return run
 
     def _excerpt_run(
@@ -806,6 +835,20 @@ class _Bench:
         largest = params.actuator.preset.largest_axial_load_n
         return ToldCountRun(scene.name, scene.group, metrics, largest)
 
+    def _evidence(
+        self, scene: BenchScene, samples: MotorSamples, truth: TruthSamples
+    ) -> list[float] | None:
+        """The evidence for each of the run's onsets under the default configuration's model
+        (None without onsets or without a motion cycle)."""
+        cycle = cycle_period_s(scene.scene)
+        if not len(truth.jam_onsets) or cycle is None:
+            return None
+        begin = time.perf_counter()
+        params = params_for(scene.scene, Fidelity(), base=self.base)
+        evidence = onsets_evidence(params, samples, truth, cycle)
+        self.progress(f"{scene.name} evidence per onset: {time.perf_counter() - begin:.1f} s")
+        return evidence
+
     def _data(self, scene: BenchScene) -> tuple[MotorSamples, TruthSamples, float | None]:
         """The scene's samples and truth (read or simulated) and its decode baseline."""
         if scene.bag is None:
@@ -818,10 +861,11 @@ class _Bench:
         """Every planned run on one scene."""
         started = time.perf_counter()
         samples, truth, decode = self._data(scene)
+        evidence = self._evidence(scene, samples, truth)
         for config in self.configs:
             if scene.runs(config.name):
                 begin = time.perf_counter()
-                self.runs.append(self._full_run(scene, config, samples, truth, decode))
+                self.runs.append(self._full_run(scene, config, samples, truth, decode, evidence))
                 self.progress(f"{scene.name} x {config.name}: {time.perf_counter() - begin:.1f} s")
         ran_default = scene.runs("default") and any(c.name == "default" for c in self.configs)
         if ran_default and len(truth.jam_onsets):

@@ -149,7 +149,12 @@ def _jam_floors(onsets: list[JamOnset]) -> list[Floor]:
             group = [o for o in found if o.count == count]
             hits = sum(o.within_cycle for o in group)
             cancelled = sum(o.ripple_cancelled for o in group)
-            note = f" ({cancelled} with the ripple cancelled)" if cancelled else ""
+            notes = [f"{cancelled} with the ripple cancelled"] if cancelled else []
+            missed = [o for o in group if not o.within_cycle and o.evidence_nats is not None]
+            if missed:
+                blind = sum(o.evidence_nats <= 0.0 for o in missed if o.evidence_nats is not None)
+                notes.append(f"{blind} of the {len(missed)} missed without evidence")
+            note = f" ({'; '.join(notes)})" if notes else ""
             parts.append(f"jam {count}: {hits}/{len(group)}{note}")
         delays = [o.delay_s for o in found if o.delay_s is not None]
         median = f", median delay {np.median(delays):.2f} s" if delays else ""
@@ -589,6 +594,7 @@ def _onsets(results: BenchResults) -> list[str]:
                 _delay(o.delay_s),
                 _number(o.cycle_s, ".1f"),
                 "yes" if o.within_cycle else "**no**",
+                _number(o.evidence_nats, ".1f"),
             ]
         )
     header = [
@@ -600,6 +606,7 @@ def _onsets(results: BenchResults) -> list[str]:
         "identified after",
         "cycle s",
         "in 1 cycle",
+        "evidence nats",
     ]
     return _table(header, rows)
 

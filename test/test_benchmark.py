@@ -117,6 +117,10 @@ def test_jam_onsets_are_categorised_and_timed(results: BenchResults) -> None:
             onset.delay_s is not None and onset.delay_s <= onset.cycle_s
         )
         assert onset.ripple_after == pytest.approx(1.0) and onset.ripple_turn_deg is None
+    # The evidence is measured once, under the default configuration's model: a jam in steady
+    # motion with the wall's radial load has far more than a block's prior odds (18 nats).
+    assert onsets[0].evidence_nats == onsets[1].evidence_nats
+    assert onsets[0].evidence_nats is not None and onsets[0].evidence_nats > 18.0
 
 
 def test_runs_with_jams_are_run_again_told_the_count(results: BenchResults, tmp_path: Path) -> None:

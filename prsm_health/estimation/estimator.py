@@ -94,6 +94,25 @@ class HealthEstimator:
         """Samples accepted and rejected (by reason) so far."""
         return self._blocker.counters
 
+    @property
+    def log_evidence(self) -> float:
+        """log p(y) of the blocks that weighed the jam counts so far, under the filter bank's
+        model (the sum of the log normalisers of the counts' probabilities)."""
+        return self._bank.log_evidence
+
+    def assume_jam_onset(self, jammed_rollers: int) -> list[HealthState]:
+        """Diagnostics (estimation/evidence.py): the samples fed so far are estimated (their
+        estimates are returned, as by :meth:`finish`); from now on ``jammed_rollers`` are
+        jammed for certain, as if the extra jams had just been born in the filter (the likeliest
+        state and ripple, a new roller's ripple prior each; :meth:`JamHypotheses.assume_onset`).
+
+        Raises:
+            ValueError: fewer jammed rollers than the likeliest hypothesis has.
+        """
+        before = self.finish()
+        self._bank.assume_onset(jammed_rollers)
+        return before
+
     # --- persistence --------------------------------------------------------------------
     def snapshot(self) -> dict[str, Any]:
         """Everything needed to resume after a restart, as plain JSON-able data.

@@ -265,6 +265,9 @@ class JamHypotheses:
             (initial, initial),
         )
         self.hypotheses: list[Hypothesis] = []
+        #: log p(y) of the blocks that weighed the counts so far: the sum of each such block's
+        #: log sum_k P(k) N(y; h_k, S_k) (what the probabilities are normalised by).
+        self.log_evidence = 0.0
         self._start(params.model.initial_jammed_rollers, np.zeros(self._dim), np.diag(initial))
 
     def _start(self, count: int, x: FloatArray, p: FloatArray) -> None:
@@ -286,6 +289,23 @@ class JamHypotheses:
             x[RIPPLE] = 0.0
             self._forget(p, RIPPLE)
         self._start(count, x, p)
+
+    def assume_onset(self, count: int) -> None:
+        """Diagnostics (estimation/evidence.py): ``count`` jammed rollers for certain from now
+        on, as if the jams beyond the likeliest hypothesis' count had just been born: its
+        state, with a new roller's ripple prior added per extra jammed roller (step 1 of the
+        module docstring). Unlike :meth:`reset_count` the ripple learnt so far is kept."""
+        best = self.most_likely()
+        extra = count - best.count
+        if not 0 <= extra <= self.n_rollers - best.count:
+            raise ValueError(
+                f"count: must be within {best.count}..{self.n_rollers} (jams only increase), "
+                f"got {count}"
+            )
+        p = best.filter.P + extra * self._jump_cov
+        axis = best.ripple_axis if extra == 0 else None
+        self._start(count, best.filter.x.copy(), p)
+        self.hypotheses[[h.count for h in self.hypotheses].index(count)].ripple_axis = axis
 
     def _forget(self, p: FloatArray, states: slice) -> None:
         """Put ``states`` of the covariance ``p`` (in place) back at their initial variances,
@@ -396,7 +416,7 @@ class JamHypotheses:
                 fresh=True,
             )
             for h in established
-            if h.count < self.n_rollers and math.isfinite(h.log_prob)
+            if h.count < self.n_rollers and math.isfinite(h.log_prob) and expected_jams > 0.0
         ]
         self.hypotheses = established + fresh
 
@@ -502,10 +522,13 @@ class JamHypotheses:
             nis.append(innovation**2 / spread)
             log_likelihood.append(-0.5 * (nis[-1] + math.log(2.0 * math.pi * spread)))
         gated = min(nis) > self._params.filter.gate_nis
-        if evidence and block.direction and not gated:
+        weighed = evidence and bool(block.direction) and not gated
+        if weighed:
             for h, value in zip(self.hypotheses, log_likelihood, strict=True):
                 h.log_prob += value
-        self._normalise()
+        total = self._normalise()
+        if weighed:
+            self.log_evidence += total
         predictions = []
         for h, prior, polar in zip(self.hypotheses, priors, polars, strict=True):
             kf = h.filter
@@ -621,10 +644,12 @@ class JamHypotheses:
             p = repair_covariance(p, self._floor)
         return p
 
-    def _normalise(self) -> None:
+    def _normalise(self) -> float:
+        """Probabilities summing to 1; returns the log of what they summed to."""
         total = float(np.logaddexp.reduce([h.log_prob for h in self.hypotheses]))
         for h in self.hypotheses:
             h.log_prob -= total
+        return total
 
     def _drop_unlikely(self) -> None:
         """Prune hypotheses below their probability floor (never the most likely one): a

@@ -105,8 +105,9 @@ class ModelParams:
     ripple_phase_known_rad: the phase counts as known when its standard deviation is below
     this. ripple_phase_walk_rad_per_sqrt_s: the phase's drift while a stroke starts, where the
     ripple of a hypothesis whose phase is known is updated in polar coordinates
-    (estimation/phasor.py). jam_rate_per_h: prior
-    rate of a new jam. initial_jammed_rollers: jammed count known at start (after maintenance, 0).
+    (estimation/phasor.py). jam_rate_per_h: prior rate of a new jam (0: the count rises
+    only when told, estimation/evidence.py). initial_jammed_rollers: jammed count known at
+    start (after maintenance, 0).
     wear_coefficient_factor: the actuator's wear coefficient relative to the preset's, when
     calibrated (1 = the preset's). wear_coefficient_sigma_ln: log-normal spread of the true
     coefficient around that value (0.5 is the prior the scenes draw from).
@@ -142,7 +143,7 @@ class ModelParams:
                 "ripple_phase_walk_per_sqrt_s": (1e-9, 10.0),
                 "ripple_phase_known_rad": (1e-6, math.pi),
                 "ripple_phase_walk_rad_per_sqrt_s": (1e-9, 10.0),
-                "jam_rate_per_h": (1e-12, 1e6),
+                "jam_rate_per_h": (0.0, 1e6),
                 "wear_coefficient_factor": (1e-6, 1e6),
                 "wear_coefficient_sigma_ln": (0.0, 5.0),
             },

@@ -345,3 +345,59 @@ def test_a_new_jammed_roller_adds_the_ripple_prior_to_its_parents_ripple() -> No
     added = np.diag([0.0] * RIPPLE_COS + [prior, prior])
     np.testing.assert_array_equal(born[1], healthy + added)
     np.testing.assert_array_equal(born[2], one + added)
+
+
+def test_the_log_evidence_sums_the_likelihoods_of_the_blocks_that_weigh_the_counts() -> None:
+    """With no jams of its own (rate 0) the bank is one filter, and its log evidence is the sum
+    of that filter's log N(y; h(x), S) over the moving blocks with evidence: not standstill
+    blocks, not blocks marked without evidence, not gated blocks."""
+    p = EstimatorParams(actuator=Actuator(preset=PRESET), model=ModelParams(jam_rate_per_h=0.0))
+    bank = JamHypotheses(p, TorqueModel(p))
+    rng = np.random.default_rng(5)
+    expected, used = 0.0, 0
+    for i in range(200):
+        block = dataclasses.replace(
+            moving_block(rng.normal(2.0, 0.02), rng),
+            duration_s=0.04,
+            motor_speed_rad_s=150.0 if i % 5 else 0.0,
+            direction=1 if i % 5 else 0,
+        )
+        evidence = i % 7 != 0
+        result = bank.step(block, jerk_psd=5e11, evidence=evidence)
+        (h,) = bank.hypotheses
+        assert h.count == 0  # no births at rate 0
+        y, s = float(h.filter.y[0]), float(h.filter.S[0, 0])
+        if evidence and block.direction and not result.gated:
+            expected += -0.5 * (y * y / s + math.log(2.0 * math.pi * s))
+            used += 1
+    assert bank.log_evidence == pytest.approx(expected, rel=1e-12)
+    assert 50 < used < 200
+
+
+def test_an_assumed_onset_is_a_birth_that_keeps_the_ripple_learnt() -> None:
+    """assume_onset(k): the likeliest state with a new roller's ripple prior per extra roller,
+    alone; the same count keeps its ripple axis, a higher one starts without (a new roller
+    turns the phase); fewer jams than the likeliest count are refused."""
+    p = EstimatorParams(actuator=Actuator(preset=PRESET))
+    bank = JamHypotheses(p, TorqueModel(p))
+    dim = bank.hypotheses[0].filter.dim_x
+    x, cov = np.arange(1.0, dim + 1.0), np.eye(dim) * 2.0
+    axis = np.array([0.6, 0.8])
+    bank.hypotheses = [Hypothesis(1, bank._new_filter(x, cov), 0.0, ripple_axis=axis)]
+    prior = p.model.ripple_prior_std**2
+    bank.assume_onset(1)
+    (same,) = bank.hypotheses
+    assert same.count == 1 and same.ripple_axis is axis
+    np.testing.assert_array_equal(same.filter.x, x)
+    np.testing.assert_array_equal(same.filter.P, cov)
+    bank.assume_onset(3)
+    (born,) = bank.hypotheses
+    assert born.count == 3 and born.ripple_axis is None
+    np.testing.assert_array_equal(born.filter.x, x)
+    np.testing.assert_array_equal(
+        born.filter.P, cov + np.diag([0.0] * RIPPLE_COS + [2 * prior] * 2)
+    )
+    with pytest.raises(ValueError, match="jams only increase"):
+        bank.assume_onset(2)
+    with pytest.raises(ValueError, match=r"within 3\.\.10"):
+        bank.assume_onset(11)
