@@ -150,9 +150,11 @@ def _jam_floors(onsets: list[JamOnset]) -> list[Floor]:
             hits = sum(o.within_cycle for o in group)
             cancelled = sum(o.ripple_cancelled for o in group)
             notes = [f"{cancelled} with the ripple cancelled"] if cancelled else []
-            missed = [o for o in group if not o.within_cycle and o.evidence_nats is not None]
+            missed = [
+                o.evidence_nats for o in group if not o.within_cycle and o.evidence_nats is not None
+            ]
             if missed:
-                blind = sum(o.evidence_nats <= 0.0 for o in missed if o.evidence_nats is not None)
+                blind = sum(evidence <= 0.0 for evidence in missed)
                 notes.append(f"{blind} of the {len(missed)} missed without evidence")
             note = f" ({'; '.join(notes)})" if notes else ""
             parts.append(f"jam {count}: {hits}/{len(group)}{note}")

@@ -107,7 +107,8 @@ class HealthEstimator:
         state and ripple, a new roller's ripple prior each; :meth:`JamHypotheses.assume_onset`).
 
         Raises:
-            ValueError: fewer jammed rollers than the likeliest hypothesis has.
+            ValueError: fewer jammed rollers than the likeliest hypothesis has, or more than
+                the preset's rollers (nothing is changed then but the pending estimates).
         """
         before = self.finish()
         self._bank.assume_onset(jammed_rollers)

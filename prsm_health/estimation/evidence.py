@@ -44,7 +44,8 @@ def _log_evidence_at(
     closed at every onset, whatever the count does there, so that paths that differ only in
     their counts see the same blocks."""
     estimator = HealthEstimator(params)
-    events = sorted({*onsets_s, *reads_s})
+    last = max(reads_s)
+    events = sorted(time_s for time_s in {*onsets_s, *reads_s} if time_s <= last)
     onset_count = dict(zip(onsets_s, counts, strict=True))
     found: dict[float, float] = {}
     begin = 0
