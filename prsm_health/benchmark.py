@@ -741,7 +741,7 @@ def jam_onsets(
 ) -> list[JamOnset]:
     """The run's true jam onsets with their category, the ripple change they make (from the
     truth's jammed rollers), their detection delay and, if given, the evidence for each
-    (:func:`onsets_evidence`, in the order of the truth's onsets)."""
+    (:meth:`_Bench._evidence`, in the order of the truth's onsets)."""
     moving = MOVING_FRACTION * params.actuator.preset.largest_speed_rpm * RPM_TO_RAD_S
     if evidence is not None and len(evidence) != len(run.metrics.jams):
         raise ValueError(f"evidence: {len(evidence)} values for {len(run.metrics.jams)} onsets")
@@ -767,21 +767,6 @@ def jam_onsets(
             )
         )
     return onsets
-
-
-def onsets_evidence(
-    params: EstimatorParams, samples: MotorSamples, truth: TruthSamples, cycle_s: float
-) -> list[float]:
-    """:func:`~prsm_health.estimation.evidence.onset_evidence` of each of the truth's onsets
-    within one cycle."""
-    onsets = truth.jam_onsets
-    return onset_evidence(
-        params,
-        samples,
-        truth.stamp_s[onsets].tolist(),
-        truth.jammed_rollers[onsets].tolist(),
-        window_s=cycle_s,
-    )
 
 
 # --- running --------------------------------------------------------------------------------
@@ -845,7 +830,14 @@ class _Bench:
             return None
         begin = time.perf_counter()
         params = params_for(scene.scene, Fidelity(), base=self.base)
-        evidence = onsets_evidence(params, samples, truth, cycle)
+        onsets = truth.jam_onsets
+        evidence = onset_evidence(
+            params,
+            samples,
+            truth.stamp_s[onsets].tolist(),
+            truth.jammed_rollers[onsets].tolist(),
+            window_s=cycle,
+        )
         self.progress(f"{scene.name} evidence per onset: {time.perf_counter() - begin:.1f} s")
         return evidence
 

@@ -54,7 +54,7 @@ def _log_evidence_at(
         estimator.process(samples[begin:end])
         begin = end
         if time_s in onset_count:
-            estimator.assume_jam_onset(max(onset_count[time_s], 0))
+            estimator.assume_jam_onset(onset_count[time_s])
         if time_s in reads_s:
             found[time_s] = estimator.log_evidence
     return found

@@ -270,13 +270,21 @@ class JamHypotheses:
         self.log_evidence = 0.0
         self._start(params.model.initial_jammed_rollers, np.zeros(self._dim), np.diag(initial))
 
-    def _start(self, count: int, x: FloatArray, p: FloatArray) -> None:
-        """Certainty of ``count`` jammed rollers at (x, P): one hypothesis, or with pruning off
-        every count, the others at probability zero."""
+    def _start(
+        self, count: int, x: FloatArray, p: FloatArray, axis: FloatArray | None = None
+    ) -> None:
+        """Certainty of ``count`` jammed rollers at (x, P), its ripple walking along ``axis``:
+        one hypothesis, or with pruning off every count, the others at probability zero."""
         self._spare_filters += [h.filter for h in self.hypotheses]
         counts = [count] if self._prune else list(range(self.n_rollers + 1))
         self.hypotheses = [
-            Hypothesis(k, self._new_filter(x, p), 0.0 if k == count else -math.inf) for k in counts
+            Hypothesis(
+                k,
+                self._new_filter(x, p),
+                0.0 if k == count else -math.inf,
+                ripple_axis=axis if k == count else None,
+            )
+            for k in counts
         ]
 
     def reset_count(self, count: int) -> None:
@@ -302,10 +310,8 @@ class JamHypotheses:
                 f"count: must be within {best.count}..{self.n_rollers} (jams only increase), "
                 f"got {count}"
             )
-        p = best.filter.P + extra * self._jump_cov
         axis = best.ripple_axis if extra == 0 else None
-        self._start(count, best.filter.x.copy(), p)
-        self.hypotheses[[h.count for h in self.hypotheses].index(count)].ripple_axis = axis
+        self._start(count, best.filter.x.copy(), best.filter.P + extra * self._jump_cov, axis)
 
     def _forget(self, p: FloatArray, states: slice) -> None:
         """Put ``states`` of the covariance ``p`` (in place) back at their initial variances,
@@ -416,7 +422,8 @@ class JamHypotheses:
                 fresh=True,
             )
             for h in established
-            if h.count < self.n_rollers and math.isfinite(h.log_prob) and expected_jams > 0.0
+            # not born with probability zero (a ruled-out parent, or no jams at rate 0)
+            if h.count < self.n_rollers and math.isfinite(h.log_prob + log_jump)
         ]
         self.hypotheses = established + fresh
 
