@@ -17,7 +17,9 @@ import dataclasses
 import json
 import math
 import os
+import signal
 import sys
+import threading
 from collections.abc import Sequence
 from pathlib import Path
 from typing import Any, NoReturn
@@ -39,6 +41,8 @@ from prsm_health.scenes.simulator import Simulator
 EXIT_USAGE = 2
 #: Exit code after the reader of stdout went away (128 + SIGPIPE, as the shell reports it).
 EXIT_BROKEN_PIPE = 141
+#: Exit code of a ``simulate`` stopped by Ctrl-C (128 + SIGINT, as a shell reports it).
+EXIT_INTERRUPTED = 130
 RPM_TO_RAD_S = 2.0 * math.pi / 60.0
 M_PER_S_TO_UM_PER_H = 1e6 * 3600.0
 
@@ -97,7 +101,13 @@ def _build_parser() -> _Parser:
         "--scene", required=True, help=f"one of {', '.join(scene_names())}, or a YAML file"
     )
     simulate.add_argument("--duration", type=_finite, metavar="S", help="override duration_s")
-    simulate.add_argument("--rate", type=_finite, metavar="HZ", help="override rate_hz")
+    simulate.add_argument(
+        "--rate",
+        type=_finite,
+        metavar="HZ",
+        help="override rate_hz (the truth's rate becomes the largest whole divisor of it up "
+        "to the scene's truth_rate_hz)",
+    )
     simulate.add_argument("--seed", type=int, metavar="N", help="override the seed")
     simulate.add_argument(
         "--joint-states", action="store_true", help="also write /joint_states (JointState)"
@@ -222,15 +232,26 @@ def _run_simulate(args: argparse.Namespace) -> int:
         "seed": args.seed,
         "joint_states": True if args.joint_states else None,
     }
+    if args.rate is not None and args.rate > 0.0:
+        overrides["truth_rate_hz"] = args.rate / math.ceil(args.rate / scene.truth_rate_hz)
     scene = dataclasses.replace(scene, **{k: v for k, v in overrides.items() if v is not None})
     if args.out.exists() or args.out.is_symlink():
         if not args.force:
             raise ValueError(f"{args.out} exists (use --force to replace a bag)")
         _remove_bag(args.out)
     simulator = Simulator(scene, exact=True if args.exact else None)
-    with tqdm(total=scene.samples, unit="sample", unit_scale=True, disable=None) as bar:
-        motor, truth = record(simulator, args.out, progress=bar.update)
+    stop = threading.Event()
+    previous = signal.signal(signal.SIGINT, lambda _signal, _frame: stop.set())
+    try:
+        with tqdm(total=scene.samples, unit="sample", unit_scale=True, disable=None) as bar:
+            motor, truth = record(simulator, args.out, progress=bar.update, stop=stop)
+    finally:
+        signal.signal(signal.SIGINT, previous)
     print(f"{args.out}: scene {scene.name}, {motor} motor samples, {truth} truth samples")
+    if stop.is_set():
+        seconds = motor / scene.rate_hz
+        print(f"interrupted: the bag holds the first {seconds:g} s of {scene.duration_s:g} s")
+        return EXIT_INTERRUPTED
     return 0
 
 

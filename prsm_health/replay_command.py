@@ -2,8 +2,10 @@
 
 Parameters: ``--params FILE`` (estimator YAML, docs/estimation.md), else the bundled
 config/default.yaml; ``--scene NAME|FILE`` takes the actuator section from a scene file, and a
-bag named after a bundled scene (bags/sudden-jam, ...) takes its scene's actuator unless
-``--params`` is given (the scenes accelerate wear: the estimator must know by how much).
+bag named after a bundled scene takes its scene's actuator unless ``--params`` is given (the
+scenes accelerate wear: the estimator must know by how much). The bag's name is its
+directory's (bags/sudden-jam, or ``.`` inside it), or for an ``.mcap`` file its stem or else
+its directory's (bags/sudden-jam/sudden-jam.mcap).
 """
 
 from __future__ import annotations
@@ -19,6 +21,8 @@ from tqdm import tqdm
 
 from prsm_health.bags import InputTopics
 from prsm_health.bags.bagfiles import bag_files
+from prsm_health.bags.reader import joint_names
+from prsm_health.bags.topics import MOTOR_FRAME
 from prsm_health.estimation.estimate import UM_PER_M
 from prsm_health.estimation.params import EstimatorParams, bundled_params_file, params_from_mapping
 from prsm_health.replay import ReplayResult, replay
@@ -39,7 +43,9 @@ def add_replay_command(commands: Any) -> None:
     parser.add_argument(
         "--joint-states", metavar="TOPIC", help="read sensor_msgs/JointState from TOPIC instead"
     )
-    parser.add_argument("--joint-name", default="prsm_motor", metavar="NAME")
+    parser.add_argument(
+        "--joint-name", metavar="NAME", help=f"the motor joint (default {MOTOR_FRAME})"
+    )
     parser.add_argument("--effort", choices=("current", "torque"), default="current")
     parser.add_argument("--hardware-id", default="prsm_health", metavar="ID")
     parser.set_defaults(handler=run_replay)
@@ -53,8 +59,8 @@ def _params(args: argparse.Namespace) -> tuple[EstimatorParams, str]:
     except YamlError as exc:
         raise ValueError(f"--params: {exc}") from exc
     scene = args.scene
-    if scene is None and args.params is None and args.bag.name in scene_names():
-        scene = args.bag.name
+    if scene is None and args.params is None:
+        scene = bundled_scene_of(args.bag)
     params = params_from_mapping(data)
     if scene is None:
         return params, str(path)
@@ -62,13 +68,38 @@ def _params(args: argparse.Namespace) -> tuple[EstimatorParams, str]:
     return dataclasses.replace(params, actuator=actuator), f"{path}, actuator of scene {scene}"
 
 
+def bundled_scene_of(bag: Path) -> str | None:
+    """The bundled scene a bag is named after (module docstring), if any."""
+    path = bag.resolve()
+    names = [path.stem, path.parent.name] if path.suffix == ".mcap" else [path.name]
+    return next((name for name in names if name in scene_names()), None)
+
+
+def _check_outputs(args: argparse.Namespace) -> None:
+    """Refuse, before the replay, outputs that could not be written afterwards."""
+    if args.out is not None and args.out.exists():
+        raise ValueError(f"--out: {args.out} exists")
+    if args.report is not None and args.report.exists() and not args.report.is_dir():
+        raise ValueError(f"--report: {args.report} exists and is not a directory")
+    if args.metrics_json is not None and args.metrics_json.is_dir():
+        raise ValueError(f"--metrics-json: {args.metrics_json} is a directory")
+    if args.joint_name is not None and args.joint_states is None:
+        raise ValueError("--joint-name: applies only with --joint-states TOPIC")
+
+
 def run_replay(args: argparse.Namespace) -> int:
-    """Replay the bag, print a summary, write what was asked; 1 if the bag was damaged."""
+    """Replay the bag, print a summary, write what was asked; 1 if the bag was damaged.
+
+    Raises:
+        ValueError: an output that cannot be written, or no sample of the bag accepted (the
+            summary is printed first).
+    """
     params, source = _params(args)
+    _check_outputs(args)
     topics = InputTopics(
         motor_state=args.motor_state_topic,
         joint_states=args.joint_states,
-        joint_name=args.joint_name,
+        joint_name=args.joint_name or MOTOR_FRAME,
         effort=args.effort,
         torque_constant_nm_per_a=(
             params.actuator.drive_train.torque_constant_nm_per_a
@@ -76,8 +107,6 @@ def run_replay(args: argparse.Namespace) -> int:
             else None
         ),
     )
-    if args.out is not None and args.out.exists():
-        raise ValueError(f"--out: {args.out} exists")
     bag_files(args.bag)  # a missing or malformed bag fails here, before any output
     with tqdm(unit="sample", unit_scale=True, disable=None, file=sys.stderr) as bar:
         result = replay(
@@ -89,13 +118,36 @@ def run_replay(args: argparse.Namespace) -> int:
             hardware_id=args.hardware_id,
         )
     print(summary(args.bag, source, result))
-    if args.metrics_json is not None and result.metrics is not None:
-        args.metrics_json.write_text(json.dumps(result.metrics.to_dict(), indent=2) + "\n")
-    if args.report is not None and result.states:
-        from prsm_health.report import write_report  # matplotlib: only when a report is asked
+    if result.samples and not result.counters.accepted:
+        raise ValueError(f"no sample of {args.bag} accepted: {_rejected_why(args)}")
+    if args.metrics_json is not None:
+        if result.metrics is None:
+            print(f"  --metrics-json: not written, {args.bag} has no ground truth to score")
+        else:
+            args.metrics_json.parent.mkdir(parents=True, exist_ok=True)
+            args.metrics_json.write_text(json.dumps(result.metrics.to_dict(), indent=2) + "\n")
+    if args.report is not None:
+        if not result.states:
+            print("  --report: not written, no estimates")
+        else:
+            from prsm_health.report import write_report  # matplotlib: only when a report is asked
 
-        write_report(args.report, result.states, result.truth, result.metrics, title=args.bag.name)
+            write_report(
+                args.report, result.states, result.truth, result.metrics, title=args.bag.name
+            )
     return 1 if result.damage is not None else 0
+
+
+def _rejected_why(args: argparse.Namespace) -> str:
+    """The likeliest reason why every sample was rejected."""
+    if args.joint_states is None:
+        return "every one is non-finite or out of range"
+    names = joint_names(args.bag, args.joint_states)
+    return (
+        f"JointState messages on {args.joint_states} without joint "
+        f"{args.joint_name or MOTOR_FRAME!r} give NaN samples (--joint-name); "
+        f"the first message names {', '.join(map(repr, names)) or 'no joint'}"
+    )
 
 
 def summary(bag: Path, source: str, result: ReplayResult) -> str:

@@ -22,6 +22,7 @@ from prsm_health.cli import main
 from prsm_health.estimation.estimate import EstimateEvent
 from prsm_health.estimation.params import EstimatorParams
 from prsm_health.replay import replay
+from prsm_health.replay_command import bundled_scene_of
 from prsm_health.report import _band, _series, plt
 from prsm_health.scenes.recording import record
 from prsm_health.scenes.scene import load_scene, scene_from_mapping
@@ -179,6 +180,56 @@ def test_cli_refuses_a_missing_bag_and_bad_params_in_one_line(
     assert main(["replay", str(tmp_path / "nope"), "--params", str(bad)]) == 2
     err = capsys.readouterr().err
     assert err.count("\n") == 1 and "filter.block_duration_s" in err
+
+
+def test_a_bag_named_after_a_bundled_scene_takes_its_actuator(
+    monkeypatch: pytest.MonkeyPatch,
+) -> None:
+    """By its directory, its .mcap file or ``.`` inside it; a bag of another name does not
+    (with a scene's actuator unseen, the replay reported a precision loss of 0)."""
+    directory = BUNDLED_BAGS / "sudden-jam"
+    assert bundled_scene_of(directory) == "sudden-jam"
+    assert bundled_scene_of(directory / "sudden-jam.mcap") == "sudden-jam"
+    monkeypatch.chdir(directory)
+    assert bundled_scene_of(Path(".")) == "sudden-jam"
+    assert bundled_scene_of(BUNDLED_BAGS) is None
+
+
+def test_cli_checks_output_paths_before_the_replay_and_makes_the_metrics_folder(
+    bag: Path, tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    a_file = tmp_path / "a-file"
+    a_file.write_text("")
+    assert main(["replay", str(bag), "--report", str(a_file)]) == 2
+    captured = capsys.readouterr()
+    assert captured.out == "", "refused before replaying"
+    assert "--report" in captured.err and captured.err.count("\n") == 1
+    assert main(["replay", str(bag), "--metrics-json", str(tmp_path)]) == 2
+    assert "is a directory" in capsys.readouterr().err
+    assert main(["replay", str(bag), "--joint-name", "j1"]) == 2
+    assert "--joint-states" in capsys.readouterr().err
+
+    metrics = tmp_path / "new" / "folder" / "metrics.json"
+    assert main(["replay", str(bag), "--metrics-json", str(metrics)]) == 0
+    assert json.loads(metrics.read_text())["jams"]
+
+
+def test_cli_says_when_no_sample_matches_the_joint_name_and_what_is_skipped(
+    bag: Path, tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    argv = ["replay", str(bag), "--joint-states", "/joint_states", "--joint-name", "wrong"]
+    assert main(argv) == 2
+    captured = capsys.readouterr()
+    assert "rejected" in captured.out  # the summary first
+    assert "'wrong'" in captured.err and "'prsm_motor'" in captured.err
+
+    no_truth = tmp_path / "no-truth"
+    with BagWriter(no_truth) as writer:
+        write_motor_states(writer, read_motor_samples(bag, InputTopics()))
+    metrics = tmp_path / "metrics.json"
+    assert main(["replay", str(no_truth), "--metrics-json", str(metrics)]) == 0
+    assert "--metrics-json: not written" in capsys.readouterr().out
+    assert not metrics.exists()
 
 
 def test_params_with_another_block_size_still_replay(bag: Path) -> None:

@@ -39,7 +39,7 @@ from prsm_health.bags.errors import BagDamagedError, BagError, TopicNotFoundErro
 from prsm_health.bags.mcap_scan import BagScanner, RawBatch
 from prsm_health.bags.stamps import stamps_to_seconds
 from prsm_health.bags.topics import MOTOR_FRAME, MOTOR_STATE_TOPIC, TRUTH_TOPIC
-from prsm_health.bags.typestore import GROUND_TRUTH, JOINT_STATE, MOTOR_STATE
+from prsm_health.bags.typestore import GROUND_TRUTH, JOINT_STATE, MOTOR_STATE, typestore
 from prsm_health.signals import MotorSamples, TruthSamples
 
 Decoder = Callable[[NDArray[np.uint8], NDArray[np.int64], NDArray[np.int64]], Columns]
@@ -123,6 +123,13 @@ class _TopicReader:
             )
         return found is not None
 
+    def require(self, scanner: BagScanner) -> bool | None:
+        """:meth:`present`, but an absent topic raises :meth:`absent`'s error."""
+        present = self.present(scanner)
+        if present is False:
+            raise self.absent(self.files.topics or scanner.declared_topics() or {})
+        return present
+
     def absent(self, topics: dict[str, str]) -> TopicNotFoundError:
         """The error for a topic that is not in the bag."""
         listed = ", ".join(f"{t} ({m})" for t, m in sorted(topics.items())) or "none"
@@ -150,9 +157,7 @@ class _TopicReader:
     def pieces(self) -> Iterator[tuple[NDArray[np.uint64], int | None, Columns]]:
         """Per segment: log times, the final-before bound and the decoded columns."""
         with closing(BagScanner(self.files.files)) as scanner:
-            present = self.present(scanner)
-            if present is False:
-                raise self.absent(self.files.topics or scanner.declared_topics() or {})
+            present = self.require(scanner)
             for batch in scanner.batches(self.topic):
                 if batch.msgtype != self.msgtype:
                     raise BagError(
@@ -275,6 +280,29 @@ def iter_motor_samples(
         yield _motor_samples(columns, topics)
     if reader.error is not None:
         raise reader.error
+
+
+def joint_names(path: str | Path, topic: str) -> list[str]:
+    """The joint names of the first JointState message on ``topic`` (diagnostics of a
+    ``--joint-name`` that matches nothing); empty if the topic has no readable message.
+
+    Raises:
+        BagError: the topic is absent or of another type, or the bag is not readable.
+    """
+    # Its columns are not decoded: the reader serves for its checks of the topic only.
+    reader = _TopicReader(path, topic, JOINT_STATE, partial(decode_joint_states, joint=""))
+    with closing(BagScanner(reader.files.files)) as scanner:
+        reader.require(scanner)
+        for batch in scanner.batches(topic):
+            if len(batch.starts):
+                start, size = int(batch.starts[0]), int(batch.sizes[0])
+                payload = batch.buffer[start : start + size].tobytes()
+                try:
+                    message: Any = typestore().deserialize_cdr(payload, JOINT_STATE)
+                except Exception:  # rosbags raises assorted errors on malformed data
+                    return []
+                return [str(name) for name in message.name]
+    return []
 
 
 @overload

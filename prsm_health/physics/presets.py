@@ -92,8 +92,12 @@ def load_preset(name_or_path: str) -> Preset:
         with resources.as_file(resource) as path:
             return load_preset_file(path)
     path = Path(name_or_path)
-    if path.suffix in (".yaml", ".yml") and path.is_file():
+    if path.suffix in (".yaml", ".yml"):
+        if not path.is_file():
+            raise ParameterError("preset", f"no such preset file {name_or_path!r}")
         return load_preset_file(path)
     raise ParameterError(
-        "preset", f"unknown preset {name_or_path!r}; choose one of {', '.join(PRESET_NAMES)}"
+        "preset",
+        f"unknown preset {name_or_path!r}: a preset file ends in .yaml or .yml, or choose one "
+        f"of {', '.join(PRESET_NAMES)}",
     )

@@ -11,6 +11,7 @@ machine or the time of day.
 
 from __future__ import annotations
 
+import threading
 from collections.abc import Callable
 from pathlib import Path
 
@@ -27,11 +28,13 @@ def record(
     path: Path,
     *,
     progress: Callable[[int], None] | None = None,
+    stop: threading.Event | None = None,
 ) -> tuple[int, int]:
     """Simulate ``simulator``'s scene into the new bag directory ``path``.
 
-    ``progress`` is called with the number of samples simulated after every chunk.
-    Returns the numbers of motor and truth messages written.
+    ``progress`` is called with the number of samples simulated after every chunk. When
+    ``stop`` is set, the recording ends after the chunk being written, and the bag is closed
+    as a complete (shorter) bag. Returns the numbers of motor and truth messages written.
     """
     scene = simulator.scene
     motor_count = truth_count = 0
@@ -49,4 +52,6 @@ def record(
             remaining -= done
             if progress is not None:
                 progress(done)
+            if stop is not None and stop.is_set():
+                break
     return motor_count, truth_count

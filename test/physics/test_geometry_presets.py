@@ -83,3 +83,8 @@ def test_user_preset_file_in_scientific_notation(tmp_path: Path) -> None:
 def test_unknown_preset_lists_the_choices() -> None:
     with pytest.raises(ParameterError, match=r"dong2022-downhole"):
         load_preset("nope")
+
+
+def test_a_missing_preset_file_is_named_as_a_file() -> None:
+    with pytest.raises(ParameterError, match=r"no such preset file '/nonexistent/p.yaml'"):
+        load_preset("/nonexistent/p.yaml")
