@@ -11,6 +11,7 @@ docs/estimation.md explains the model, what is observable and each option.
 
 from __future__ import annotations
 
+import dataclasses
 import hashlib
 import math
 from collections import deque
@@ -88,6 +89,7 @@ class HealthEstimator:
         self._direction = 0
         self._direction_since_s = -math.inf
         self._resumed = False
+        self._last: HealthState | None = None
 
     @property
     def counters(self) -> InputCounters:
@@ -198,6 +200,7 @@ class HealthEstimator:
         self.counters.accepted = accepted
         self.counters.rejected = rejected
         self._resumed = True
+        self._last = None
 
     def reset_after_maintenance(
         self, jammed_rollers: int, *, reset_precision_loss: bool, reset_fatigue_damage: bool
@@ -235,6 +238,31 @@ class HealthEstimator:
             precision_loss=reset_precision_loss, fatigue_damage=reset_fatigue_damage
         )
         return before
+
+    def current_state(self) -> HealthState | None:
+        """The latest estimate brought up to the state now, e.g. after
+        :meth:`reset_after_maintenance`: jam probabilities, degradation, sample counters and
+        mean NIS (0 while its window is empty) as they are now; the stamp, load, friction,
+        efficiency and speed of the last estimated block, which no later sample has changed;
+        event NONE (no new block). None before the first estimate (also after a restore)."""
+        last = self._last
+        if last is None:
+            return None
+        degradation = self._degradation.state
+        nis = self._mean_nis()
+        return dataclasses.replace(
+            last,
+            jam_probabilities=tuple(float(p) for p in self._bank.probabilities()),
+            precision_loss_m=degradation.precision_loss_m,
+            precision_loss_std_m=self._degradation.precision_loss_std_m,
+            precision_loss_rate_m_per_s=degradation.rate_m_per_s,
+            fatigue_damage=degradation.fatigue_damage,
+            fatigue_damage_std=self._degradation.fatigue_damage_std,
+            samples_accepted=self.counters.accepted,
+            samples_rejected=self.counters.rejected_total,
+            nis=nis if math.isfinite(nis) else 0.0,
+            event=EstimateEvent.NONE,
+        )
 
     def process(self, samples: MotorSamples) -> list[HealthState]:
         """Feed samples (any number); returns the estimates of the blocks they complete."""
@@ -307,7 +335,8 @@ class HealthEstimator:
             self._degradation.add(duration, weights, step.predictions, load_std)
         else:
             self._degradation.stop()
-        return self._state(block, step, weights, event)
+        self._last = self._state(block, step, weights, event)
+        return self._last
 
     def _load_transition(self, block: Block) -> bool:
         """Whether a stroke starts (the first ``model.load_transition_s`` of a direction of

@@ -4,7 +4,8 @@ Subscribes to ``/diagnostics`` and ``<node>/health``. Table mode prints one comp
 DiagnosticArray that holds prsm_health statuses (the latest estimate on top, then one line per
 status); on a terminal each block replaces the previous one. JSON mode prints one object per
 message (``{"topic": ..., ...}``). Ends after ``count`` printed records (blocks or JSON lines)
-or after ``timeout_s``.
+or after ``timeout_s``. A monitor started after the node sees the diagnostics at once (they are
+published periodically) but an estimate only when the node makes a new one.
 """
 
 from __future__ import annotations
@@ -19,14 +20,20 @@ from typing import Any, TextIO
 import rclpy
 from diagnostic_msgs.msg import DiagnosticArray
 from prsm_health_msgs.msg import HealthEstimate
+from rclpy.exceptions import InvalidTopicNameException
 from rclpy.executors import SingleThreadedExecutor
 from rclpy.qos import QoSProfile, QoSReliabilityPolicy
+from rclpy.validate_full_topic_name import validate_full_topic_name
 
 from prsm_health.outputs import Level
 from prsm_health.ros.messages import stamp_seconds
 
 STATUS_PREFIX = "prsm_health: "
 CLEAR = "\x1b[H\x1b[J"
+#: The table's first line until an estimate comes (diagnostics may come first: see above).
+NO_ESTIMATE = (
+    "no estimate received since the monitor started (the node publishes one per new estimate)"
+)
 
 
 @dataclass(frozen=True, kw_only=True)
@@ -39,6 +46,30 @@ class MonitorOptions:
     json: bool = False
     count: int = 0
     timeout_s: float = 0.0
+
+    def __post_init__(self) -> None:
+        """Refuse a node name that cannot name a topic, as a usage error (ValueError), before
+        rclpy raises at the subscription."""
+        try:
+            validate_full_topic_name(self.full_name)
+        except InvalidTopicNameException as exc:
+            # rclpy's first line, e.g. "Invalid topic name: topic name must not ...:"
+            reason = str(exc).splitlines()[0].removeprefix("Invalid topic name: topic name ")
+            reason = reason.removesuffix(":")
+            raise ValueError(
+                f"--node {self.node!r} is not a node name such as /prsm_health: {reason}"
+            ) from None
+
+    @property
+    def full_name(self) -> str:
+        """``node``, absolute (the monitor's own node is in the root namespace, where a
+        relative name resolves the same), without a trailing slash."""
+        return "/" + self.node.strip("/")
+
+    @property
+    def health_topic(self) -> str:
+        """The node's ``~/health``."""
+        return self.full_name + "/health"
 
 
 def health_record(msg: Any) -> dict[str, Any]:
@@ -84,7 +115,7 @@ def health_line(record: dict[str, Any]) -> str:
 
 def table(health: dict[str, Any] | None, diagnostics: dict[str, Any]) -> str:
     """The compact block: the estimate, then level, short name and message of each status."""
-    lines = [health_line(health) if health else "no estimate yet"]
+    lines = [health_line(health) if health else NO_ESTIMATE]
     for status in diagnostics["status"]:
         name = status["name"].removeprefix(STATUS_PREFIX)
         lines.append(f"  {status['level']:<5} {name:<18} {status['message']}")
@@ -101,11 +132,13 @@ class Monitor:
         self.latest_diagnostics: dict[str, Any] | None = None
         self.records = 0
         self.health_received = 0
+        self.timed_out = False
         self._live = out.isatty() and not options.json
         self._node = rclpy.create_node("prsm_health_monitor")
         reliable = QoSProfile(depth=50, reliability=QoSReliabilityPolicy.RELIABLE)
-        health_topic = options.node.rstrip("/") + "/health"
-        self._node.create_subscription(HealthEstimate, health_topic, self._on_health, reliable)
+        self._node.create_subscription(
+            HealthEstimate, options.health_topic, self._on_health, reliable
+        )
         self._node.create_subscription(
             DiagnosticArray, "/diagnostics", self._on_diagnostics, reliable
         )
@@ -147,9 +180,22 @@ class Monitor:
         deadline = time.monotonic() + self.options.timeout_s if self.options.timeout_s else None
         while not (stop.is_set() or self.done()):
             if deadline is not None and time.monotonic() >= deadline:
+                self.timed_out = True
                 break
             self.spin_once()
         return self.done() if self.options.count else self.records > 0
+
+    def shortfall(self) -> str:
+        """Why :meth:`run` returned False, for the user: first of all whether anything came."""
+        within = f" within {self.options.timeout_s:g} s" if self.timed_out else ""
+        if not self.health_received and self.latest_diagnostics is None:
+            return (
+                f"nothing received on {self.options.health_topic} or /diagnostics{within}: is"
+                " the node running, under this name, with the same ROS_DOMAIN_ID?"
+            )
+        if self.options.count:
+            return f"{self.records} of {self.options.count} records printed{within}"
+        return f"estimates received{within}, but no prsm_health statuses on /diagnostics"
 
     def close(self) -> None:
         """Destroy the executor and the node."""

@@ -429,7 +429,10 @@ class HealthNode(LifecycleNode):
     def _on_reset(self, request: Any, response: Any) -> Any:
         """``~/reset_after_maintenance``: the samples received so far are estimated first
         (they belong to before the maintenance), then the estimator is reset
-        (:meth:`HealthEstimator.reset_after_maintenance`) and the state saved at once."""
+        (:meth:`HealthEstimator.reset_after_maintenance`) and the state saved at once. The
+        reset state (:meth:`HealthEstimator.current_state`, at the last estimate's stamp) is
+        handled as the newest estimate, so the health topic and the diagnostics show it
+        without waiting for new input."""
         try:
             estimator, config = self._estimator, self._config
             if estimator is None or config is None:  # the service exists only while configured
@@ -440,7 +443,9 @@ class HealthNode(LifecycleNode):
                 reset_precision_loss=request.reset_precision_loss,
                 reset_fatigue_damage=request.reset_fatigue_damage,
             )
-            self._handle_estimates(estimator, config, before, 0)
+            reset_state = estimator.current_state()  # None before the first estimate
+            after = [reset_state] if reset_state is not None else []
+            self._handle_estimates(estimator, config, before + after, 0)
             reset = [f"jammed rollers {request.jammed_rollers}"]
             reset += ["precision loss 0"] if request.reset_precision_loss else []
             reset += ["fatigue damage 0"] if request.reset_fatigue_damage else []

@@ -8,7 +8,9 @@ the start. Optionally ``/clock`` (rosgraph_msgs/Clock) carries the log time, for
 keep ``PUBLISHER_DEPTH`` messages.
 
 ``wait_for_subscribers_s``: before the first message, wait until every played topic (and
-``/clock`` if published) has a subscriber (at most that long; error otherwise), then
+``/clock`` if published) has a subscriber (at most that long; otherwise an error naming the
+topics with and without one: a topic nothing reads, e.g. ``/truth/state``, is left out with
+``topics``), then
 :data:`SETTLE_S` more so that the subscriber side of discovery completes too: a best-effort
 subscriber drops what arrives before it has matched the publisher. At the end the player
 waits for reliable subscribers to acknowledge everything (at most ``ACK_TIMEOUT_S``), so a
@@ -106,10 +108,25 @@ def _wait_for_subscribers(
     deadline = time.monotonic() + timeout_s
     while missing := [t for t, p in publishers.items() if p.get_subscription_count() == 0]:
         if time.monotonic() > deadline:
-            raise PlayError(f"no subscriber after {timeout_s:g} s on {', '.join(missing)}")
+            raise PlayError(_no_subscriber(list(publishers), missing, timeout_s))
         if stop.wait(0.02):
             return
     stop.wait(SETTLE_S)
+
+
+def _no_subscriber(topics: list[str], missing: list[str], timeout_s: float) -> str:
+    """The error of a wait that timed out: the topics without a subscriber, those with one,
+    and how to play only the latter (``--topics`` names bag topics: ``/clock`` is not one)."""
+    text = f"no subscriber after {timeout_s:g} s on {', '.join(missing)}"
+    subscribed = [t for t in topics if t not in missing]
+    if subscribed:
+        text += f"; {', '.join(subscribed)} {'has' if len(subscribed) == 1 else 'have'} one"
+    played = [t for t in subscribed if t != "/clock"]
+    if played and missing != ["/clock"]:
+        text += f": pass --topics {' '.join(played)} to play only the subscribed topics"
+    if "/clock" in missing:
+        text += "; drop --clock if no node uses sim time"
+    return text
 
 
 def _has_reliable_subscriber(node: Any, topic: str) -> bool:

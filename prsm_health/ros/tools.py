@@ -122,8 +122,7 @@ def _run_monitor(args: argparse.Namespace) -> int:
         finally:
             monitor.close()
     if not complete:
-        wanted = f"{options.count} records" if options.count else "any message"
-        print(f"prsm-health monitor: {monitor.records} printed, {wanted} wanted", file=sys.stderr)
+        print(f"prsm-health monitor: {monitor.shortfall()}", file=sys.stderr)
     return 0 if complete else 1
 
 

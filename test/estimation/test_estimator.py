@@ -254,12 +254,14 @@ def test_maintenance_resets_the_count_and_only_what_was_replaced() -> None:
     result = simulate(scene)
     params = EstimatorParams(actuator=scene.actuator)
     estimator = HealthEstimator(params)
+    assert estimator.current_state() is None  # no estimate yet
     cut = int(np.searchsorted(result.motor.stamp_s, 12.0))  # standstill after two strokes
     before = estimator.process(result.motor[:cut])[-1]
     assert int(np.argmax(before.jam_probabilities)) == 1
     assert before.precision_loss_m > 0.0 and before.fatigue_damage > 0.0
     other = HealthEstimator(params)
     other.restore(estimator.snapshot())
+    assert other.current_state() is None  # a restored state has no estimate
     for bad in (-1, 11, 1.0, True):  # a float or bool count would break the bank later
         expected = rf"jammed_rollers: must be an integer within 0\.\.10 .*got {bad!r}"
         with pytest.raises(ValueError, match=expected):
@@ -274,6 +276,15 @@ def test_maintenance_resets_the_count_and_only_what_was_replaced() -> None:
     )
     # The samples fed before the maintenance are estimated before it.
     assert pending and all(int(np.argmax(s.jam_probabilities)) == 1 for s in pending)
+    # The reset state at once, at the last estimate's stamp (for the node to publish).
+    reset = estimator.current_state()
+    assert reset is not None and reset.event == EstimateEvent.NONE
+    last = pending[-1]
+    assert (reset.stamp_s, reset.axial_load_n) == (last.stamp_s, last.axial_load_n)
+    assert reset.jam_probabilities[0] == 1.0
+    assert reset.precision_loss_m == reset.precision_loss_std_m == 0.0
+    assert reset.fatigue_damage == last.fatigue_damage > 0.0
+    assert reset.nis == 0.0  # the consistency window starts again
     after = estimator.process(result.motor[cut:]) + estimator.finish()
     first = after[0]
     assert first.jam_probabilities[0] > 1.0 - 1e-6  # the prior of a jam in 0.5 s: 1.4e-7

@@ -1,16 +1,18 @@
 """The maintenance reset over the node's service, with real processes: a jam identified live
-is reset to the count the maintenance leaves, the precision loss to zero, the state saved at
-once; what cannot be reset is refused with the reason."""
+is reset to the count the maintenance leaves, the precision loss to zero, the state saved and
+published at once; what cannot be reset is refused with the reason."""
 
 from __future__ import annotations
 
 import json
 import shutil
 from pathlib import Path
+from typing import Any
 
 import pytest
 from prsm_health_msgs.srv import ResetAfterMaintenance
 
+from prsm_health.outputs import JAMMED_ROLLERS
 from test.ros.data import ORIGIN_S, synthetic_run, worn_params, write_bag
 from test.ros.harness import Listener, NodeProcess, play
 
@@ -60,6 +62,7 @@ def test_a_reset_after_maintenance_over_the_service(ros: None, tmp_path: Path) -
             assert refused.message.startswith(refusal)
             assert not state_file.exists()
 
+            diagnosed = len(listener.diagnostics)  # those before showed the jam, or not yet
             done = listener.call(
                 ResetAfterMaintenance, SERVICE, request(0, precision_loss=True, note="roller 3")
             )
@@ -72,6 +75,29 @@ def test_a_reset_after_maintenance_over_the_service(ros: None, tmp_path: Path) -
             assert saved["degradation"]["fatigue_damage"] == pytest.approx(
                 jammed["fatigue_damage"], rel=0.05
             )
+            # Published at once, without new input: the operator sees the reset.
+            listener.wait_for(
+                lambda: listener.health[-1]["jammed_rollers_most_likely"] == 0,
+                10.0,
+                "the reset state on the health topic",
+            )
+            reset, last = listener.health[-1], listener.health[-2]
+            assert reset["stamp"] == last["stamp"]  # the last estimate's: time does not go back
+            assert reset["jammed_rollers_probability"][0] == 1.0
+            assert reset["precision_loss_um"] == 0.0
+            assert reset["fatigue_damage"] == last["fatigue_damage"]
+
+            def jam_status() -> dict[str, Any]:
+                """The jammed-rollers status of the latest diagnostics since the reset call."""
+                arrays = [{s["name"]: s for s in d["status"]} for d in listener.diagnostics]
+                return arrays[-1].get(JAMMED_ROLLERS, {}) if arrays[diagnosed:] else {}
+
+            listener.wait_for(
+                lambda: "no jammed roller" in jam_status().get("message", ""),
+                10.0,
+                "the reset count in the diagnostics",
+            )
+            assert jam_status()["values"]["jammed_rollers_most_likely"] == "0"
 
             before = len(listener.health)
             play(healthy, listener=listener)

@@ -12,9 +12,10 @@ import pytest
 from prsm_health_msgs.msg import MotorState
 from rclpy.qos import QoSProfile, QoSReliabilityPolicy
 
+from prsm_health.bags.writer import BagWriter, write_joint_states, write_motor_states
 from prsm_health.outputs import INPUT_HEALTH, Level
 from prsm_health.ros.messages import stamp_seconds
-from prsm_health.ros.monitor import table
+from prsm_health.ros.monitor import Monitor, MonitorOptions, table
 from prsm_health.ros.player import ACK_TIMEOUT_S
 from test.ros.data import short_jam_scene, simulated_bag, synthetic_run, write_bag
 from test.ros.harness import Listener, NodeProcess, start_player, stop_process
@@ -51,6 +52,34 @@ def test_play_refuses_what_it_cannot_play(tmp_path: Path) -> None:
     looped = cli("play", str(empty), "--loop", timeout_s=30.0)  # it spun at 100 % CPU
     assert looped.returncode == 1
     assert "nothing to loop: the bag has no messages on the topics to play" in looped.stderr
+
+
+def test_play_names_the_topics_without_a_subscriber(ros: None, tmp_path: Path) -> None:
+    """--wait-for-subscribers waits for every played topic: one nothing reads (as a scene
+    bag's /truth/state) makes it fail, and the error says which and how to leave it out."""
+    samples = synthetic_run(0.1)
+    with BagWriter(tmp_path / "bag") as writer:
+        write_motor_states(writer, samples)
+        write_joint_states(writer, samples)
+    listener = Listener()
+    qos = QoSProfile(depth=10, reliability=QoSReliabilityPolicy.RELIABLE)
+    listener.node.create_subscription(MotorState, "/motor_state", lambda m: None, qos)
+    try:
+        waited = cli("play", str(tmp_path / "bag"), "--wait-for-subscribers", "5")
+        clocked = cli("play", str(tmp_path / "bag"), "--clock", "--wait-for-subscribers", "5")
+    finally:
+        listener.close()
+    assert waited.returncode == 1
+    assert waited.stderr.strip().endswith(
+        "no subscriber after 5 s on /joint_states; /motor_state has one:"
+        " pass --topics /motor_state to play only the subscribed topics"
+    )
+    assert clocked.returncode == 1
+    assert clocked.stderr.strip().endswith(
+        "no subscriber after 5 s on /joint_states, /clock; /motor_state has one:"
+        " pass --topics /motor_state to play only the subscribed topics;"
+        " drop --clock if no node uses sim time"
+    )
 
 
 def test_play_publishes_every_message(tmp_path: Path) -> None:
@@ -127,9 +156,37 @@ def test_play_names_what_a_reliable_subscriber_did_not_acknowledge(
 
 
 def test_monitor_times_out_without_a_node() -> None:
-    done = cli("monitor", "--count", "1", "--timeout", "0.5")
+    done = cli("monitor", "--node", "nobody", "--count", "1", "--timeout", "0.5")
     assert done.returncode == 1
-    assert "0 printed, 1 records wanted" in done.stderr
+    assert done.stderr == (
+        "prsm-health monitor: nothing received on /nobody/health or /diagnostics within 0.5 s:"
+        " is the node running, under this name, with the same ROS_DOMAIN_ID?\n"
+    )
+
+
+def test_monitor_refuses_an_invalid_node_name() -> None:
+    done = cli("monitor", "--node", "bad name", "--timeout", "0.5")
+    assert done.returncode == 2
+    assert done.stderr == (
+        "prsm-health: error: --node 'bad name' is not a node name such as /prsm_health:"
+        " must not contain characters other than alphanumerics, '_', or '/'\n"
+    )
+
+
+def test_monitor_says_what_was_missing(ros: None) -> None:
+    """Received, but not enough printed: the count, or that no status came to print."""
+    counted = Monitor(MonitorOptions(count=3, timeout_s=2.0))
+    listed = Monitor(MonitorOptions(timeout_s=2.0))
+    try:
+        counted.records = counted.health_received = 1
+        counted.timed_out = listed.timed_out = True
+        assert counted.shortfall() == "1 of 3 records printed within 2 s"
+        listed.health_received = 4  # in table mode only a status prints a record
+        expected = "estimates received within 2 s, but no prsm_health statuses on /diagnostics"
+        assert listed.shortfall() == expected
+    finally:
+        counted.close()
+        listed.close()
 
 
 def test_monitor_table() -> None:
@@ -154,7 +211,9 @@ def test_monitor_table() -> None:
         "  fatigue 0.001",
         "  ERROR jammed rollers     1 jammed roller (p = 0.97)",
     ]
-    assert table(None, {"status": []}) == "no estimate yet"
+    assert table(None, {"status": []}) == (  # the node may have estimated before
+        "no estimate received since the monitor started (the node publishes one per new estimate)"
+    )
 
 
 @pytest.mark.timeout(120)
