@@ -24,6 +24,7 @@ SIGINT and SIGTERM shut it down cleanly with the state saved. docs/ros.md has th
 from __future__ import annotations
 
 import dataclasses
+import math
 import sys
 from collections import Counter
 from collections.abc import Sequence
@@ -306,9 +307,10 @@ class HealthNode(LifecycleNode):
         return TransitionCallbackReturn.SUCCESS
 
     def _stop(self) -> None:
-        """Process what was received, save, unsubscribe and stop the timers."""
+        """Process what was received, the last unfinished block included (the input ends
+        here), save, unsubscribe and stop the timers."""
         if self._subscription is not None:
-            self._on_batch()
+            self._on_batch(final=True)
             self.destroy_subscription(self._subscription)
             self._subscription = None
         for timer in self._timers:
@@ -335,6 +337,7 @@ class HealthNode(LifecycleNode):
         self._latest_published = True
         self._frame_id = ""
         self._saved_at_samples = -1
+        self._input_at_steady_s = -math.inf
 
     # --- inputs -------------------------------------------------------------------------
     def _now_s(self) -> float:
@@ -366,13 +369,24 @@ class HealthNode(LifecycleNode):
         )
 
     # --- processing and outputs ---------------------------------------------------------
-    def _on_batch(self) -> None:
+    def _on_batch(self, *, final: bool = False) -> None:
+        """Estimate the samples received since the last batch. When the input has stopped
+        for ``diagnostics.stale_timeout_s`` (steady clock: sim time stops with a bag), or
+        ``final``, the samples of the last, unfinished block are estimated too
+        (:meth:`HealthEstimator.finish`; nothing once they are): a stream that ends loses
+        nothing, and its last estimate does not wait for input to resume."""
         try:
             estimator, config = self._estimator, self._config
             if estimator is None or config is None:
                 return
             samples, received = self._pending.take()
+            now_s = float(self._steady.now().nanoseconds) / NS_PER_S
+            if received:
+                self._input_at_steady_s = now_s
             states = estimator.process(samples) if len(samples) else []
+            silent_s = now_s - self._input_at_steady_s
+            if final or silent_s > estimator.params.diagnostics.stale_timeout_s:
+                states += estimator.finish()
             self._handle_estimates(estimator, config, states, received)
         except Exception as exc:
             self._fault("processing", exc)

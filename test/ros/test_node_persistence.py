@@ -51,6 +51,11 @@ def test_kill9_restart_resumes_and_sigterm_saves(ros: None, tmp_path: Path) -> N
     file offline); SIGTERM saves the final state."""
     state_file = tmp_path / "state.json"
     params = worn_params(tmp_path)
+    # Inputs never count as stopped mid-run here: the node estimates the last, unfinished
+    # block only at its shutdown, after the player has had every sample acknowledged (a
+    # stale flush could come before a sample DDS repairs late, and split that block).
+    with params.open("a") as extra:
+        extra.write("diagnostics: {stale_timeout_s: 600.0}\n")
     first = write_bag(tmp_path / "first", synthetic_run(8.0))
     resumed_at = ORIGIN_S + 10.0
     second_samples = synthetic_run(2.0, start_s=resumed_at, from_rest=False)
@@ -112,6 +117,7 @@ def test_kill9_restart_resumes_and_sigterm_saves(ros: None, tmp_path: Path) -> N
             mtime = state_file.stat().st_mtime_ns
             assert stop_process(node.process, signal.SIGTERM) == 0
         assert state_file.stat().st_mtime_ns > mtime
+        resumed.finish()  # the node estimated the last block at its shutdown
         assert_close(restored(params, state_file).snapshot(), resumed.snapshot())
         assert "Traceback" not in node.log()
     finally:
