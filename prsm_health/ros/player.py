@@ -53,6 +53,11 @@ class PlayError(RuntimeError):
     """The bag cannot be played (unreadable, unknown topic or type, no subscriber)."""
 
 
+class PlayInputError(PlayError):
+    """The bag cannot be opened, or the options ask for what it does not have: a usage
+    error (exit code 2, as ``replay``'s), not a failure while playing."""
+
+
 @dataclass(frozen=True, kw_only=True)
 class PlayOptions:
     """rate: speed factor of the log time. clock: publish /clock at clock_rate_hz of bag
@@ -143,7 +148,10 @@ def play(bag: Path, options: PlayOptions, stop: threading.Event) -> PlayReport:
         reader = Reader(bag)
         reader.open()
     except (ReaderError, OSError) as exc:
-        raise PlayError(f"cannot open bag {bag}: {exc}") from exc
+        raise PlayInputError(
+            f"cannot open bag {bag}: {exc} (a damaged bag, e.g. cut short, is read up to the "
+            "damage by prsm-health replay)"
+        ) from exc
     try:
         return _play(reader, options, stop)
     finally:
@@ -154,12 +162,12 @@ def _play(reader: Reader, options: PlayOptions, stop: threading.Event) -> PlayRe
     available = {c.topic for c in reader.connections}
     unknown = sorted(set(options.topics) - available)
     if unknown:
-        raise PlayError(
+        raise PlayInputError(
             f"no topic {', '.join(unknown)} in the bag; it has {', '.join(sorted(available))}"
         )
     connections = [c for c in reader.connections if not options.topics or c.topic in options.topics]
     if options.loop and not any(c.msgcount for c in connections):  # it would spin on nothing
-        raise PlayError("nothing to loop: the bag has no messages on the topics to play")
+        raise PlayInputError("nothing to loop: the bag has no messages on the topics to play")
     node = rclpy.create_node("prsm_health_player")
     try:
         qos = QoSProfile(depth=PUBLISHER_DEPTH, reliability=QoSReliabilityPolicy.RELIABLE)
@@ -169,7 +177,7 @@ def _play(reader: Reader, options: PlayOptions, stop: threading.Event) -> PlayRe
                 try:
                     cls = message_class(connection.msgtype)
                 except LookupError as exc:
-                    raise PlayError(f"topic {connection.topic}: {exc}") from exc
+                    raise PlayInputError(f"topic {connection.topic}: {exc}") from exc
                 publishers[connection.topic] = node.create_publisher(cls, connection.topic, qos)
         clock = _Clock(node, options.clock_rate_hz) if options.clock else None
         if options.wait_for_subscribers_s > 0.0:

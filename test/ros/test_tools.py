@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import re
+import shutil
 import signal
 import subprocess
 import sys
@@ -35,12 +36,20 @@ def cli(*args: str, timeout_s: float = 60.0) -> subprocess.CompletedProcess[str]
 
 
 def test_play_refuses_what_it_cannot_play(tmp_path: Path) -> None:
+    """Input errors exit with 2 (usage, as replay's), failures while playing with 1."""
     missing = cli("play", str(tmp_path / "none"))
-    assert missing.returncode == 1
+    assert missing.returncode == 2
     assert f"cannot open bag {tmp_path / 'none'}" in missing.stderr
     bag = write_bag(tmp_path / "bag", synthetic_run(0.1))
+    cut = tmp_path / "cut"
+    shutil.copytree(bag, cut)
+    mcap = next(cut.glob("*.mcap"))
+    mcap.write_bytes(mcap.read_bytes()[:-100])
+    damaged = cli("play", str(cut))
+    assert damaged.returncode == 2
+    assert "read up to the damage by prsm-health replay" in damaged.stderr
     unknown = cli("play", str(bag), "--topics", "/nope")
-    assert unknown.returncode == 1
+    assert unknown.returncode == 2
     assert "no topic /nope in the bag; it has /motor_state" in unknown.stderr
     bad_rate = cli("play", str(bag), "--rate", "0")
     assert bad_rate.returncode == 2
@@ -50,7 +59,7 @@ def test_play_refuses_what_it_cannot_play(tmp_path: Path) -> None:
     assert "no subscriber after 0.5 s on /motor_state" in nobody.stderr
     empty = write_bag(tmp_path / "empty", synthetic_run(0.1)[:0])  # the topic, no message
     looped = cli("play", str(empty), "--loop", timeout_s=30.0)  # it spun at 100 % CPU
-    assert looped.returncode == 1
+    assert looped.returncode == 2
     assert "nothing to loop: the bag has no messages on the topics to play" in looped.stderr
 
 
