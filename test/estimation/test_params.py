@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+import dataclasses
+import re
 from pathlib import Path
 
 import pytest
@@ -123,3 +125,30 @@ def test_load_params_reads_yaml_and_names_an_unreadable_file(tmp_path: Path) -> 
     assert load_params(path).filter.block_duration_s == pytest.approx(0.02)
     with pytest.raises(ParameterError, match=r"missing\.yaml"):
         load_params(tmp_path / "missing.yaml")
+
+
+def _documented_value(text: str) -> object:
+    """A default as docs/estimation.md writes it: true/false, a number, or a bare word."""
+    if text in ("true", "false"):
+        return text == "true"
+    try:
+        return float(text)
+    except ValueError:
+        return text
+
+
+def test_docs_list_every_parameter_with_its_default() -> None:
+    """docs/estimation.md "Every parameter": one row per key of every section, its default."""
+    docs = Path(__file__).resolve().parents[2] / "docs" / "estimation.md"
+    section = docs.read_text(encoding="utf-8").split("## Every parameter", 1)[1]
+    rows = dict(re.findall(r"^\| `(\w+\.\w+)` \| ([^|]+?) \|", section, flags=re.MULTILINE))
+    params = params_from_mapping({"actuator": {"preset": "dong2022-downhole"}})
+    expected = {
+        f"{f.name}.{key.name}": getattr(getattr(params, f.name), key.name)
+        for f in dataclasses.fields(params)
+        if f.name != "actuator"
+        for key in dataclasses.fields(getattr(params, f.name))
+    }
+    assert sorted(rows) == sorted(expected)
+    for key, default in expected.items():
+        assert _documented_value(rows[key]) == default, key
