@@ -1,10 +1,12 @@
 """The replay's report: PNG plots of the estimates against the truth, and an index page.
 
 ``prsm-health replay BAG --report DIR`` writes ``load.png`` (axial load with +-2 std and the
-truth), ``jams.png`` (probability of each jam count over time, the true count on top),
-``precision_loss.png`` (estimate +-2 std, cut at zero, and the truth) and ``index.html`` (the
-three plots and the metrics). After a sensor time reset the estimates are drawn on the truth's
-clock, shifted by the offsets the metrics found (the x label says by how much). matplotlib's
+truth; with the truth, a second panel of the error, estimate minus truth, inside its own +-2
+std: readable where an hour of strokes makes the first one a solid block), ``jams.png``
+(probability of each jam count over time, the true count on top), ``precision_loss.png``
+(estimate +-2 std, cut at zero, and the truth) and ``index.html`` (the three plots and the
+metrics). After a sensor time reset the estimates are drawn on the truth's clock, shifted by
+the offsets the metrics found (the x label says by how much). matplotlib's
 Agg backend: no display needed.
 """
 
@@ -22,6 +24,7 @@ import matplotlib.pyplot as plt
 import numpy as np
 from matplotlib.artist import Artist
 from matplotlib.axes import Axes
+from matplotlib.figure import Figure
 from matplotlib.ticker import MaxNLocator
 from numpy.typing import NDArray
 
@@ -31,6 +34,11 @@ from prsm_health.signals import TruthSamples
 
 FloatArray = NDArray[np.float64]
 PLOTS = ("load.png", "jams.png", "precision_loss.png")
+#: The load error panel's axis: this quantile of |error| while moving, times the margin (a few
+#: blocks beyond it are cut off rather than flatten the rest), at least the smallest [kN].
+ERROR_AXIS_QUANTILE = 0.99
+ERROR_AXIS_MARGIN = 2.0
+SMALLEST_ERROR_AXIS_KN = 0.01
 
 
 @dataclass(frozen=True)
@@ -41,6 +49,7 @@ class _Series:
     jams: FloatArray  # (estimates, counts)
     loss_um: FloatArray
     loss_std_um: FloatArray
+    moving: NDArray[np.bool_]
 
 
 def _series(states: list[HealthState], clock_offsets_s: tuple[float, ...] | None) -> _Series:
@@ -55,6 +64,7 @@ def _series(states: list[HealthState], clock_offsets_s: tuple[float, ...] | None
         jams=np.array([s.jam_probabilities for s in states]),
         loss_um=np.array([s.precision_loss_m for s in states]) * UM_PER_M,
         loss_std_um=np.array([s.precision_loss_std_m for s in states]) * UM_PER_M,
+        moving=np.array([s.screw_speed_rad_s != 0.0 for s in states], dtype=bool),
     )
 
 
@@ -73,6 +83,41 @@ def _band(
     band = f"{label} +-2 std" + (", cut at 0" if non_negative else "")
     axis.fill_between(t, low, mean + 2 * std, alpha=0.3, label=band)
     axis.plot(t, mean, lw=1.0, label=label)
+
+
+def _load_figure(series: _Series, truth: TruthSamples | None, *, xlabel: str, title: str) -> Figure:
+    """The axial load with its band and the truth; with the truth, below it the error
+    (estimate minus the truth interpolated to each estimate, as the metrics score it) inside
+    +-2 std."""
+    t = series.stamp_s
+    if truth is None:
+        figure, axis = plt.subplots(figsize=(10, 4))
+        axis.set_xlabel(xlabel)
+    else:
+        figure, (axis, error_axis) = plt.subplots(
+            2, 1, figsize=(10, 6), sharex=True, height_ratios=(2, 1)
+        )
+        error_kn = series.load_kn - np.interp(t, truth.stamp_s, truth.axial_load_n / 1e3)
+        two_std = 2.0 * series.load_std_kn
+        error_axis.fill_between(t, -two_std, two_std, alpha=0.3, label="+-2 std")
+        error_axis.plot(t, error_kn, lw=0.8, label="estimate - truth")
+        error_axis.set(xlabel=xlabel, ylabel="load error [kN]")
+        if series.moving.any():
+            # Scaled to the errors in motion: at standstill and at the stroke ends the load
+            # is hardly observed (its band spans tens of kN) and would flatten them.
+            size = np.abs(error_kn[series.moving])
+            limit = ERROR_AXIS_MARGIN * float(np.quantile(size, ERROR_AXIS_QUANTILE))
+            error_axis.set_ylim(
+                -max(limit, SMALLEST_ERROR_AXIS_KN), max(limit, SMALLEST_ERROR_AXIS_KN)
+            )
+            error_axis.set_title("scaled to the errors in motion (wider bands cut off)", fontsize=9)
+        error_axis.legend(loc="best")
+    _band(axis, t, series.load_kn, series.load_std_kn, "estimate")
+    if truth is not None:
+        axis.plot(truth.stamp_s, truth.axial_load_n / 1e3, "k--", lw=0.8, label="truth")
+    axis.set(ylabel="axial load [kN]", title=f"{title}: axial load")
+    axis.legend(loc="best")
+    return figure
 
 
 def write_report(
@@ -96,13 +141,7 @@ def write_report(
         xlabel += f" (estimates after a sensor time reset shifted by {shifts}, as scored)"
     figures = []
 
-    figure, axis = plt.subplots(figsize=(10, 4))
-    _band(axis, t, series.load_kn, series.load_std_kn, "estimate")
-    if truth is not None:
-        axis.plot(truth.stamp_s, truth.axial_load_n / 1e3, "k--", lw=0.8, label="truth")
-    axis.set(xlabel=xlabel, ylabel="axial load [kN]", title=f"{title}: axial load")
-    axis.legend(loc="best")
-    figures.append(figure)
+    figures.append(_load_figure(series, truth, xlabel=xlabel, title=title))
 
     figure, axis = plt.subplots(figsize=(10, 4))
     counts = series.jams.shape[1]

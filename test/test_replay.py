@@ -23,7 +23,7 @@ from prsm_health.estimation.estimate import EstimateEvent
 from prsm_health.estimation.params import EstimatorParams
 from prsm_health.replay import replay
 from prsm_health.replay_command import bundled_scene_of
-from prsm_health.report import _band, _series, plt
+from prsm_health.report import _band, _load_figure, _series, plt
 from prsm_health.scenes.recording import record
 from prsm_health.scenes.scene import load_scene, scene_from_mapping
 from prsm_health.scenes.simulator import Simulator
@@ -286,3 +286,29 @@ def test_diagnostics_go_on_after_the_clock_jumps_back(bag: Path, tmp_path: Path)
     new_line = np.array(seconds[jump:])
     assert len(new_line) >= 4 and new_line[0] < stamps[half] + 1.2
     assert np.all(np.diff(new_line) > 0.9)
+
+
+def test_the_load_plot_shows_the_error_inside_its_band_when_there_is_truth(bag: Path) -> None:
+    """With the truth, load.png has a second panel: estimate minus truth (as scored) and the
+    +-2 std band about zero; without, one panel."""
+    result = replay(bag, params())
+    assert result.truth is not None
+    series = _series(result.states, None)
+    with_truth = _load_figure(series, result.truth, xlabel="t", title="x")
+    without = _load_figure(series, None, xlabel="t", title="x")
+    try:
+        assert len(without.axes) == 1
+        error_axis = with_truth.axes[1]
+        (line,) = error_axis.lines
+        true_kn = np.interp(series.stamp_s, result.truth.stamp_s, result.truth.axial_load_n / 1e3)
+        np.testing.assert_allclose(line.get_ydata(), series.load_kn - true_kn)
+        # Scaled to the motion: the errors while moving fill the axis (not the standstill's
+        # band of tens of kN).
+        low, high = error_axis.get_ylim()
+        moving = series.moving
+        size = np.abs(series.load_kn - true_kn)[moving]
+        assert high == -low and np.quantile(size, 0.99) < high <= 2 * np.quantile(size, 0.99)
+        assert high < 0.5 * 2 * series.load_std_kn.max()
+    finally:
+        plt.close(with_truth)
+        plt.close(without)
