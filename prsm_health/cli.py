@@ -17,6 +17,7 @@ import dataclasses
 import json
 import math
 import os
+import shutil
 import signal
 import sys
 import threading
@@ -41,6 +42,9 @@ from prsm_health.scenes.simulator import Simulator
 EXIT_USAGE = 2
 #: Exit code after the reader of stdout went away (128 + SIGPIPE, as the shell reports it).
 EXIT_BROKEN_PIPE = 141
+#: Bytes per motor sample of a simulated bag with its truth, a little above those measured
+#: (43 on nominal-downhole; 82 with /joint_states, counted as twice this).
+BAG_BYTES_PER_SAMPLE = 50
 #: Exit code of a ``simulate`` stopped by Ctrl-C (128 + SIGINT, as a shell reports it).
 EXIT_INTERRUPTED = 130
 RPM_TO_RAD_S = 2.0 * math.pi / 60.0
@@ -214,6 +218,20 @@ def _run_model_demo(_args: argparse.Namespace) -> int:
     return 0
 
 
+def _check_room(samples: int, *, joint_states: bool, out: Path) -> None:
+    """Refuse a bag that would not fit on the disk of ``out`` (estimated from
+    BAG_BYTES_PER_SAMPLE), before hours of simulation fill it."""
+    per_sample = BAG_BYTES_PER_SAMPLE * (2 if joint_states else 1)
+    needed = samples * per_sample
+    existing = next(p for p in (out.absolute(), *out.absolute().parents) if p.exists())
+    free = shutil.disk_usage(existing).free
+    if needed > free:
+        raise ValueError(
+            f"--out: {samples} samples would take about {needed / 1e9:.3g} GB "
+            f"({per_sample} bytes each), {free / 1e9:.3g} GB are free: shorten --duration"
+        )
+
+
 def _remove_bag(path: Path) -> None:
     """Delete the bag directory ``path`` (--force); refuse anything that is not a bag."""
     files = list(path.iterdir()) if path.is_dir() else []
@@ -235,6 +253,7 @@ def _run_simulate(args: argparse.Namespace) -> int:
     if args.rate is not None and args.rate > 0.0:
         overrides["truth_rate_hz"] = args.rate / math.ceil(args.rate / scene.truth_rate_hz)
     scene = dataclasses.replace(scene, **{k: v for k, v in overrides.items() if v is not None})
+    _check_room(scene.samples, joint_states=scene.joint_states, out=args.out)
     if args.out.exists() or args.out.is_symlink():
         if not args.force:
             raise ValueError(f"{args.out} exists (use --force to replace a bag)")

@@ -198,3 +198,16 @@ def test_ctrl_c_during_simulate_leaves_a_complete_shorter_bag(tmp_path: Path) ->
     motor = read_motor_samples(out)
     assert 0 < len(motor) < 3_600_000
     assert len(read_truth(out)) == len(motor) // 10
+
+
+def test_simulate_refuses_a_bag_larger_than_the_free_disk(
+    tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    """--duration 1e9 (a typo for 1e3?) would need about 50 TB: refused at once, nothing
+    written (it ran silently, filling the disk)."""
+    out = tmp_path / "huge"
+    argv = ["simulate", "--scene", "nominal-downhole", "--duration", "1e9", "--out", str(out)]
+    assert main(argv) == 2
+    err = capsys.readouterr().err
+    assert "GB are free: shorten --duration" in err and err.count("\n") == 1
+    assert not out.exists()
