@@ -28,8 +28,13 @@ Assumptions that paper 002 leaves open:
   d_W cos(alpha) = 2 r_r; d_m = 2 (r_s + r_r). Then v = omega_s r_s r_n / (r_s + r_n).
 - Raceway curvature coefficient f: the screw and nut flanks are straight in profile (the Hertz
   model of :mod:`prsm_health.physics.hertz`), so f -> infinity: (2f + 1)^2 / (16 f^2) -> 1/4 in
-  eq. 4 and f R / (2f - 1) -> R in eq. 6, i.e. k = R_Y / R_X with R_Y = R (profile direction)
-  and R_X the relative radius of curvature in the rolling (circumferential) direction.
+  eq. 4 and f R / (2f - 1) -> R / 2 in eq. 6. 002 does not define R; eq. 6 is Harris's
+  R_y = f D / (2f - 1) with D the ball diameter, so R is read as d_W there and the limit is
+  R_Y = d_W / 2 = R, the ball radius: k = R_Y / R_X, R_X the relative radius of curvature in
+  the rolling (circumferential) direction. (With R read as the radius, k and the viscous
+  torque would be 2^-0.348 = 0.79 times these.) In eq. 4, R is read as the ball radius (a / R,
+  semi-axis over radius); read as d_W the differential term would be a quarter of this, below
+  1e-4 of the torque either way.
 - Eq. 2 (hysteresis): B m_b a is read as b_roll / 2, half the contact semi-axis along the
   rolling direction, i.e. Johnson's rolling resistance of an elliptic contact, moment
   (3/16) gamma Q b_roll; its dissipated power is that moment times v / R_X.
@@ -37,6 +42,9 @@ Assumptions that paper 002 leaves open:
   y^2/b^2) (as printed the integral would not return Q). Closed form: iint p r dA =
   Q a (3/8) E(1 - 1/kappa^2). Its power is the moment times the spin speed
   omega_spin = v sin(beta) (1/r_r +- 1/r_c) (+ screw, - nut); this replaces the "cos alpha".
+  (geometry's R = r_r / sin(beta) and contact radius r_s + r_r - R cos(beta), 004 eqs. 24-25,
+  take the flank angle from the other plane: the two readings agree only at beta = 45 deg,
+  the flank angle of every bundled preset.)
   The whole contact is taken to slip with Coulomb f_s (an upper bound for a lubricated
   contact); with a 45 deg flank the spin speed equals the rolling speed, and this term is
   about 90 % of a healthy roller's torque for li2020-jamming.

@@ -4,7 +4,8 @@ Model (papers 000 eq. 7-25 and 004 eq. 14-22, written as one nonlinear system):
 
 * Every roller i is a chain of n_threads nodes j (j = 0 is the loaded end). Screw, roller and
   nut segments between adjacent threads are axial springs of one pitch: the screw and nut
-  shares are E A / (N p) per roller (004 eq. 16-17), the roller E A_r / p. In loading case 1
+  shares are E A / (N p) per roller (004 eq. 16-17), the roller E A_r / p (004 writes 2p for the
+  roller segment; one thread pitch is the physical length, docs/physics.md). In loading case 1
   (screw in tension / nut in compression, 000 eq. 13; the 004 set-up) the screw load and the
   nut reaction enter at the same end, which gives a monotone distribution; in case 2 (both in
   compression, 000 eq. 21) they enter at opposite ends (U-shaped distribution).

@@ -44,13 +44,13 @@ Assumptions the papers leave open:
   nut radii that the geometry keeps); the roller-nut clearance does not depend on it because
   its minimum lies on the line of centres, where equal nut and roller helix angles cancel.
 * Slip speed (001 eq. 30 = 004 eq. 32): the roller spins relative to the carrier at
-  (r_s + 2 r_r) / r_r times the carrier speed, which is eq. 30's n_s for a standard PRSM and
-  makes both pitch points roll without slip together with 004 eq. 31. The axial term "L_s" is
+  (r_s + 2 r_r) / r_r times the carrier speed, which is 001 eq. 30's n_s for a standard PRSM and
+  makes both pitch points roll without slip together with 004 eq. 30. The axial term "L_s" is
   the screw lead n_s p: the rollers do not move axially relative to the nut, so the roller
   slides along the screw by one lead per screw revolution (the stroke of 004 Table 2 would
   be a travel, not a velocity, and gives a seven times larger speed).
 * Jammed roller (paper 002 section 2.3): the roller is seized on its carrier (spin relative to
-  the carrier zero) but still revolves at the carrier speed of eq. 31 (set by the healthy
+  the carrier zero) but still revolves at the carrier speed of eq. 30 (set by the healthy
   rollers) and still moves axially with the nut, so its slip is the full relative surface
   speed sqrt(r_sr^2 (w_s - w_p)^2 + (w_s n_s p / (2 pi))^2).
 """
@@ -342,7 +342,7 @@ def _speed_array(screw_speed_rad_s: ArrayLike) -> FloatArray:
 
 
 def carrier_speed_rad_s(geometry: Geometry, screw_speed_rad_s: ArrayLike) -> FloatArray:
-    """Revolution speed of the rollers w_p = r_s w_s / (2 (r_s + r_r)) (004 eq. 31).
+    """Revolution speed of the rollers w_p = r_s w_s / (2 (r_s + r_r)) (004 eq. 30).
 
     Nut fixed in rotation; rolling without slip at both pitch points.
     """
@@ -365,7 +365,7 @@ def slip_speed_m_s(
 
     |v| = sqrt(r_sr^2 (w_s - w_p)^2 + (k r_rs w_p)^2
                - 2 r_sr r_rs k w_p (w_s - w_p) cos(theta_sr + theta_rs) + (w_s n_s p / 2 pi)^2)
-    with w_p of 004 eq. 31 and the roller spin ratio k = (r_s + 2 r_r) / r_r (n_s of eq. 30
+    with w_p of 004 eq. 30 and the roller spin ratio k = (r_s + 2 r_r) / r_r (n_s of 001 eq. 30
     for a standard PRSM). ``jammed``: the roller does not spin relative to the carrier (paper
     002 section 2.3), k = 0. Same shape as ``screw_speed_rad_s``; proportional to |w_s|.
     """

@@ -6,7 +6,7 @@ Per sample (vectorised over a chunk; docs/scenes.md has the whole model):
    radial load F_r (clamped to rho_max |F|, the roller table's largest ratio), direction and
    loading case.
 2. Speed loop -> screw speed omega_s, acceleration, screw angle; carrier angle
-   theta = r_s / (2 (r_s + r_r)) x screw angle (004 eq. 31); roller i at phi_i = theta +
+   theta = r_s / (2 (r_s + r_r)) x screw angle (004 eq. 30); roller i at phi_i = theta +
    2 pi (i - 1) / N from the radial-load direction (000 eq. 8).
 3. Every roller's physics at its own angle: :class:`~prsm_health.physics.roller_table.RollerTable`
    lookups, or in exact mode :func:`~prsm_health.physics.roller_table.roller_values` (the
