@@ -24,6 +24,7 @@ from prsm_health.bags.bagfiles import bag_files
 from prsm_health.bags.reader import joint_names
 from prsm_health.bags.topics import MOTOR_FRAME
 from prsm_health.estimation.estimate import UM_PER_M
+from prsm_health.estimation.inputs import RejectReason
 from prsm_health.estimation.params import EstimatorParams, bundled_params_file, params_from_mapping
 from prsm_health.replay import ReplayResult, replay
 from prsm_health.scenes.scene import load_scene, scene_names
@@ -119,7 +120,7 @@ def run_replay(args: argparse.Namespace) -> int:
         )
     print(summary(args.bag, source, result))
     if result.samples and not result.counters.accepted:
-        raise ValueError(f"no sample of {args.bag} accepted: {_rejected_why(args)}")
+        raise ValueError(f"no sample of {args.bag} accepted: {_rejected_why(args, result)}")
     if args.metrics_json is not None:
         if result.metrics is None:
             print(f"  --metrics-json: not written, {args.bag} has no ground truth to score")
@@ -138,15 +139,18 @@ def run_replay(args: argparse.Namespace) -> int:
     return 1 if result.damage is not None else 0
 
 
-def _rejected_why(args: argparse.Namespace) -> str:
-    """The likeliest reason why every sample was rejected."""
+def _rejected_why(args: argparse.Namespace, result: ReplayResult) -> str:
+    """The rejections by reason, and with JointState inputs the joints the bag names (a
+    JointState without the joint gives a non-finite sample)."""
+    counts = result.counters.rejected
+    why = ", ".join(f"{r.name.lower()} {counts[r]}" for r in RejectReason if counts[r])
     if args.joint_states is None:
-        return "every one is non-finite or out of range"
-    names = joint_names(args.bag, args.joint_states)
+        return f"rejected as {why}"
+    names = ", ".join(map(repr, joint_names(args.bag, args.joint_states))) or "no joint"
     return (
-        f"JointState messages on {args.joint_states} without joint "
-        f"{args.joint_name or MOTOR_FRAME!r} give NaN samples (--joint-name); "
-        f"the first message names {', '.join(map(repr, names)) or 'no joint'}"
+        f"rejected as {why}; JointState messages on {args.joint_states} without joint "
+        f"{args.joint_name or MOTOR_FRAME!r} (--joint-name) give non-finite samples, and the "
+        f"first message names {names}"
     )
 
 

@@ -222,6 +222,7 @@ def test_cli_says_when_no_sample_matches_the_joint_name_and_what_is_skipped(
     captured = capsys.readouterr()
     assert "rejected" in captured.out  # the summary first
     assert "'wrong'" in captured.err and "'prsm_motor'" in captured.err
+    assert "rejected as non_finite" in captured.err
 
     no_truth = tmp_path / "no-truth"
     with BagWriter(no_truth) as writer:
