@@ -28,7 +28,7 @@ from matplotlib.figure import Figure
 from matplotlib.ticker import MaxNLocator
 from numpy.typing import NDArray
 
-from prsm_health.estimation.estimate import UM_PER_M, HealthState
+from prsm_health.estimation.estimate import UM_PER_M, EstimateEvent, HealthState
 from prsm_health.estimation.metrics import Metrics, on_truth_clock
 from prsm_health.signals import TruthSamples
 
@@ -49,7 +49,7 @@ class _Series:
     jams: FloatArray  # (estimates, counts)
     loss_um: FloatArray
     loss_std_um: FloatArray
-    moving: NDArray[np.bool_]
+    moving: NDArray[np.bool_]  # not a standstill block of the estimator
 
 
 def _series(states: list[HealthState], clock_offsets_s: tuple[float, ...] | None) -> _Series:
@@ -64,7 +64,7 @@ def _series(states: list[HealthState], clock_offsets_s: tuple[float, ...] | None
         jams=np.array([s.jam_probabilities for s in states]),
         loss_um=np.array([s.precision_loss_m for s in states]) * UM_PER_M,
         loss_std_um=np.array([s.precision_loss_std_m for s in states]) * UM_PER_M,
-        moving=np.array([s.screw_speed_rad_s != 0.0 for s in states], dtype=bool),
+        moving=np.array([s.event != EstimateEvent.STANDSTILL for s in states], dtype=bool),
     )
 
 
