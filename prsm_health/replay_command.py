@@ -120,7 +120,9 @@ def run_replay(args: argparse.Namespace) -> int:
         )
     print(summary(args.bag, source, result))
     if result.samples and not result.counters.accepted:
-        raise ValueError(f"no sample of {args.bag} accepted: {_rejected_why(args, result)}")
+        raise ValueError(
+            f"no sample of {args.bag} accepted: {_rejected_why(args.bag, topics, result)}"
+        )
     if args.metrics_json is not None:
         if result.metrics is None:
             print(f"  --metrics-json: not written, {args.bag} has no ground truth to score")
@@ -139,18 +141,18 @@ def run_replay(args: argparse.Namespace) -> int:
     return 1 if result.damage is not None else 0
 
 
-def _rejected_why(args: argparse.Namespace, result: ReplayResult) -> str:
+def _rejected_why(bag: Path, topics: InputTopics, result: ReplayResult) -> str:
     """The rejections by reason, and with JointState inputs the joints the bag names (a
     JointState without the joint gives a non-finite sample)."""
     counts = result.counters.rejected
     why = ", ".join(f"{r.name.lower()} {counts[r]}" for r in RejectReason if counts[r])
-    if args.joint_states is None:
+    if topics.joint_states is None:
         return f"rejected as {why}"
-    names = ", ".join(map(repr, joint_names(args.bag, args.joint_states))) or "no joint"
+    names = ", ".join(map(repr, joint_names(bag, topics.joint_states))) or "no joint"
     return (
-        f"rejected as {why}; JointState messages on {args.joint_states} without joint "
-        f"{args.joint_name or MOTOR_FRAME!r} (--joint-name) give non-finite samples, and the "
-        f"first message names {names}"
+        f"rejected as {why}; JointState messages on {topics.joint_states} without joint "
+        f"{topics.joint_name!r} (--joint-name) give non-finite samples, and the first message "
+        f"names {names}"
     )
 
 

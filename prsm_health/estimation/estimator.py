@@ -245,24 +245,9 @@ class HealthEstimator:
         mean NIS (0 while its window is empty) as they are now; the stamp, load, friction,
         efficiency and speed of the last estimated block, which no later sample has changed;
         event NONE (no new block). None before the first estimate (also after a restore)."""
-        last = self._last
-        if last is None:
+        if self._last is None:
             return None
-        degradation = self._degradation.state
-        nis = self._mean_nis()
-        return dataclasses.replace(
-            last,
-            jam_probabilities=tuple(float(p) for p in self._bank.probabilities()),
-            precision_loss_m=degradation.precision_loss_m,
-            precision_loss_std_m=self._degradation.precision_loss_std_m,
-            precision_loss_rate_m_per_s=degradation.rate_m_per_s,
-            fatigue_damage=degradation.fatigue_damage,
-            fatigue_damage_std=self._degradation.fatigue_damage_std,
-            samples_accepted=self.counters.accepted,
-            samples_rejected=self.counters.rejected_total,
-            nis=nis if math.isfinite(nis) else 0.0,
-            event=EstimateEvent.NONE,
-        )
+        return dataclasses.replace(self._last, event=EstimateEvent.NONE, **self._standing_fields())
 
     def process(self, samples: MotorSamples) -> list[HealthState]:
         """Feed samples (any number); returns the estimates of the blocks they complete."""
@@ -392,28 +377,35 @@ class HealthEstimator:
             w * p.friction_torque_nm for w, p in zip(weights, step.predictions, strict=True)
         )
         geometry = self.params.actuator.preset.geometry
-        counters = self._blocker.counters
-        degradation = self._degradation.state
-        jam = self._bank.probabilities()
-        nis = self._mean_nis()
         return HealthState(
             stamp_s=block.stamp_s,
             axial_load_n=load,
             axial_load_std_n=math.sqrt(load_var),
-            jam_probabilities=tuple(float(p) for p in jam),
-            precision_loss_m=degradation.precision_loss_m,
-            precision_loss_std_m=self._degradation.precision_loss_std_m,
-            precision_loss_rate_m_per_s=degradation.rate_m_per_s,
             friction_torque_nm=friction,
             efficiency=float(efficiency(geometry, abs(load), friction)),
-            fatigue_damage=degradation.fatigue_damage,
-            fatigue_damage_std=self._degradation.fatigue_damage_std,
             screw_speed_rad_s=block.motor_speed_rad_s / self.params.actuator.drive_train.gear_ratio,
-            samples_accepted=counters.accepted,
-            samples_rejected=counters.rejected_total,
-            nis=nis if math.isfinite(nis) else 0.0,
             event=event,
+            **self._standing_fields(),
         )
+
+    def _standing_fields(self) -> dict[str, Any]:
+        """The fields of an estimate that the estimator's state holds between blocks: jam
+        probabilities, degradation, sample counters and mean NIS (0 while its window is
+        empty); the others describe the block (:meth:`_state`, :meth:`current_state`)."""
+        counters = self._blocker.counters
+        degradation = self._degradation.state
+        nis = self._mean_nis()
+        return {
+            "jam_probabilities": tuple(float(p) for p in self._bank.probabilities()),
+            "precision_loss_m": degradation.precision_loss_m,
+            "precision_loss_std_m": self._degradation.precision_loss_std_m,
+            "precision_loss_rate_m_per_s": degradation.rate_m_per_s,
+            "fatigue_damage": degradation.fatigue_damage,
+            "fatigue_damage_std": self._degradation.fatigue_damage_std,
+            "samples_accepted": counters.accepted,
+            "samples_rejected": counters.rejected_total,
+            "nis": nis if math.isfinite(nis) else 0.0,
+        }
 
 
 def _radial_sensitivity(params: EstimatorParams) -> float:

@@ -50,12 +50,13 @@ NS_PER_S = 1e9
 
 
 class PlayError(RuntimeError):
-    """The bag cannot be played (unreadable, unknown topic or type, no subscriber)."""
+    """The play failed while it ran (no subscriber in time)."""
 
 
-class PlayInputError(PlayError):
+class PlayInputError(ValueError):
     """The bag cannot be opened, or the options ask for what it does not have: a usage
-    error (exit code 2, as ``replay``'s), not a failure while playing."""
+    error, which the command line reports as every ValueError (one line, exit code 2, as
+    ``replay``'s), not a failure while playing (:class:`PlayError`, exit code 1)."""
 
 
 @dataclass(frozen=True, kw_only=True)
@@ -73,11 +74,11 @@ class PlayOptions:
 
     def __post_init__(self) -> None:
         if not (self.rate > 0.0 and self.clock_rate_hz > 0.0):
-            raise PlayError(
+            raise PlayInputError(
                 f"rate and clock rate must be > 0, got {self.rate}, {self.clock_rate_hz}"
             )
         if self.wait_for_subscribers_s < 0.0:
-            raise PlayError("the wait for subscribers must be >= 0 s")
+            raise PlayInputError("the wait for subscribers must be >= 0 s")
 
 
 @dataclass

@@ -75,14 +75,7 @@ def add_ros_commands(commands: argparse._SubParsersAction[Parser]) -> None:
 
 
 def _run_play(args: argparse.Namespace) -> int:
-    from prsm_health.cli import EXIT_USAGE
-    from prsm_health.ros.player import (
-        ACK_TIMEOUT_S,
-        PlayError,
-        PlayInputError,
-        PlayOptions,
-        play,
-    )
+    from prsm_health.ros.player import ACK_TIMEOUT_S, PlayError, PlayOptions, play
     from prsm_health.ros.runtime import ros_session
 
     try:
@@ -98,7 +91,7 @@ def _run_play(args: argparse.Namespace) -> int:
             report = play(args.bag, options, stop)
     except PlayError as exc:
         print(f"prsm-health play: error: {exc}", file=sys.stderr)
-        return EXIT_USAGE if isinstance(exc, PlayInputError) else 1
+        return 1
     topics = ", ".join(f"{topic} {n}" for topic, n in sorted(report.published.items()))
     state = "interrupted" if report.interrupted else "done"
     print(
