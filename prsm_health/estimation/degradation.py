@@ -48,13 +48,12 @@ class DegradationIntegrator:
         *,
         wear_coefficient_sigma_ln: float,
         radial_relative_sensitivity: float,
-        state: Degradation | None = None,
     ) -> None:
         sigma = wear_coefficient_sigma_ln
         # Standard deviation of a log-normal factor with median 1.
         self._factor_std = math.sqrt(math.expm1(sigma**2) * math.exp(sigma**2))
         self._radial = radial_relative_sensitivity
-        self.state = state or Degradation()
+        self.state = Degradation()
 
     def add(
         self,

@@ -265,7 +265,12 @@ class HealthEstimator:
         states = []
         fidelity = self.params.fidelity
         for block in blocks:
-            quiet = block.direction == 0 and not block.time_reset and not block.after_gap
+            quiet = (
+                block.direction == 0
+                and not block.time_reset
+                and not block.after_gap
+                and not self._after_hole(block)
+            )
             if fidelity.merge_standstill_blocks and quiet:
                 self._standstill.append(block)
                 span = block.stamp_s - self._standstill[0].stamp_s
@@ -287,10 +292,7 @@ class HealthEstimator:
             event = EstimateEvent.TIME_RESET
         # After a restore the time since the saved state is unknown (the input stage's clock is
         # not saved): the first block follows a hole of unknown length.
-        hole = (
-            self._resumed
-            or block.silence_before_s > HOLE_BLOCKS * self.params.filter.block_duration_s
-        )
+        hole = self._resumed or self._after_hole(block)
         self._resumed = False
         if hole and not block.time_reset:
             self._bank.reinitialise_load(keep_load=True)
@@ -327,14 +329,19 @@ class HealthEstimator:
         """Whether a stroke starts (the first ``model.load_transition_s`` of a direction of
         motion) or the actuator stands. The load model's jerk density is high there (the
         traction load builds up as the motion starts) and low in steady motion, where a load
-        that follows the carrier-frequency ripple would otherwise hide a jammed roller."""
-        if block.direction != self._direction:
+        that follows the carrier-frequency ripple would otherwise hide a jammed roller. A time
+        reset starts a new time line, and its first ``model.load_transition_s`` too."""
+        if block.time_reset or block.direction != self._direction:
             self._direction = block.direction
             self._direction_since_s = block.stamp_s
         return (
             block.direction == 0
             or block.stamp_s - self._direction_since_s < self.params.model.load_transition_s
         )
+
+    def _after_hole(self, block: Block) -> bool:
+        """More than HOLE_BLOCKS blocks without an accepted sample before ``block``."""
+        return block.silence_before_s > HOLE_BLOCKS * self.params.filter.block_duration_s
 
     def _diverged(self, block: Block, step: StepResult) -> bool:
         """Gated for too long, the likeliest load beyond DIVERGED_LOAD_RATIO of the rated

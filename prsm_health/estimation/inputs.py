@@ -163,7 +163,8 @@ class SampleBlocker:
         self._pending = _empty()
         self._anchor: float | None = None
         self._last_block_stamp: float | None = None
-        self._last_sample_stamp: float | None = None
+        self._last_sample_stamp: float | None = None  # the last accepted one in a block
+        self._last_processed_stamp = math.inf  # the last one of a block, rejected or not
         self._time_reset = False
         self._previous_current = math.nan  # last sample before the pending ones
         self._stuck_run = 0  # length of the identical-current run ending there
@@ -301,7 +302,9 @@ class SampleBlocker:
         if not final and self._no_block_yet(t, period):
             self._pending = pending
             return []
-        gap_before = np.r_[False, np.diff(t) > self._params.filter.max_gap_s]
+        # The first pending sample is compared with the last one of the blocks before: a gap
+        # may follow a block already closed, or a flush (after a time reset it is earlier).
+        gap_before = np.diff(np.r_[self._last_processed_stamp, t]) > self._params.filter.max_gap_s
         # A gap starts a new time grid anchored at the first sample after it.
         anchors = np.where(gap_before, t, np.nan)
         anchors[0] = self._anchor if not gap_before[0] else t[0]
@@ -319,6 +322,7 @@ class SampleBlocker:
             return []
         end = int(starts[complete]) if complete < len(starts) else len(t)
         self._anchor = float(anchors[end - 1])
+        self._last_processed_stamp = float(t[end - 1])
         run = pending[:end]
         rejected = self._spikes_and_stuck(pending.current_a, end, final)
         self.counters.accepted += end - int(np.count_nonzero(rejected))

@@ -91,9 +91,13 @@ class ModelParams:
 
     radial_load_ratio: typical F_r / F_a (0 = no radial load; the downhole robot's wall
     contact gives about 0.15). radial_load_ratio_std: its uncertainty (enters the wear
-    rate's uncertainty). load_jerk_psd_n2_per_s5: how fast the axial load may change: the
-    white-noise density of its jerk (a constant-acceleration model: a smooth ramp of the
-    downhole cycle, 45 kN in 0.5 s, costs about one nat; a step in one block thousands).
+    rate's uncertainty). load_jerk_psd_n2_per_s5: how fast the axial load may change in
+    steady motion: the white-noise density of its jerk (a constant-acceleration model; a load
+    that followed the carrier-frequency ripple would cost tens of nats a second).
+    load_jerk_psd_transition_n2_per_s5: the same while a stroke starts (the first
+    load_transition_s of a direction of motion) and at standstill, where the traction load
+    builds up: a smooth ramp of the downhole cycle, 45 kN in 0.5 s, costs a few nats, a step in
+    one block thousands.
     ripple_prior_std: size of the carrier-frequency torque ripple a new jammed roller adds, per
     cosine and sine component, relative to the load torque at the ripple knee (measurement.py;
     0.3 for one roller with 6 kN radial load on dong2022-downhole); a first jam starts at

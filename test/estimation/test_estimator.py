@@ -20,6 +20,7 @@ from prsm_health.benchmark import (
 )
 from prsm_health.estimation.estimate import EstimateEvent, HealthState
 from prsm_health.estimation.estimator import HealthEstimator
+from prsm_health.estimation.inputs import Block
 from prsm_health.estimation.metrics import Metrics, score
 from prsm_health.estimation.params import EstimatorParams, Fidelity, FilterParams, ModelParams
 from prsm_health.scenes.scene import Scene, scene_from_mapping
@@ -243,6 +244,74 @@ def test_a_load_beyond_what_the_motor_can_drive_is_a_divergence() -> None:
     states = estimator.process(samples[1000:])
     assert states[0].event == EstimateEvent.DIVERGENCE_RECOVERED
     assert all(abs(s.axial_load_n) < 10.0 * estimator.params.rated_load_n for s in states)
+
+
+def test_a_clock_reset_starts_one_load_transition_not_one_per_block() -> None:
+    """After the clock jumps back, the load model's stroke-start transition lasts its
+    ``model.load_transition_s`` on the new time line, as after a direction change."""
+    estimator = HealthEstimator(EstimatorParams(actuator=scene_from_mapping(downhole()).actuator))
+    moving = Block(
+        stamp_s=100.0,
+        duration_s=0.04,
+        samples=40,
+        motor_torque_nm=1.0,
+        motor_speed_rad_s=150.0,
+        motor_acceleration_rad_s2=0.0,
+        carrier_cos=0.0,
+        carrier_sin=0.0,
+        direction=1,
+    )
+    transition = [estimator._load_transition(moving)]
+    transition += [
+        estimator._load_transition(dataclasses.replace(moving, stamp_s=100.0 + 0.04 * i))
+        for i in range(1, 50)
+    ]
+    reset = dataclasses.replace(moving, stamp_s=0.0, time_reset=True)
+    transition.append(estimator._load_transition(reset))
+    transition += [
+        estimator._load_transition(dataclasses.replace(moving, stamp_s=0.04 * i))
+        for i in range(1, 50)
+    ]
+    # load_transition_s = 1 s: the first 25 blocks of each time line.
+    assert estimator.params.model.load_transition_s == 1.0
+    assert transition == [i % 50 < 25 for i in range(100)]
+
+
+def hole_reinitialisations(samples: MotorSamples, *, merge: bool) -> list[bool]:
+    """``keep_load`` of each load re-initialisation while estimating ``samples``."""
+    estimator = HealthEstimator(
+        EstimatorParams(
+            actuator=scene_from_mapping(downhole()).actuator,
+            fidelity=Fidelity(merge_standstill_blocks=merge),
+        )
+    )
+    calls: list[bool] = []
+    reinitialise = estimator._bank.reinitialise_load
+
+    def recorded(*, keep_load: bool = False) -> None:
+        calls.append(keep_load)
+        reinitialise(keep_load=keep_load)
+
+    estimator._bank.reinitialise_load = recorded  # type: ignore[method-assign]
+    estimator.process(samples)
+    estimator.finish()
+    return calls
+
+
+def test_a_hole_inside_a_standstill_reacquires_the_load_merged_or_not() -> None:
+    """A silence of several blocks at standstill forgets the load's derivatives whether the
+    standstill's blocks are merged or not."""
+    rng = np.random.default_rng(1)
+
+    def rest(t0: float, t1: float) -> MotorSamples:
+        t = np.arange(t0, t1, 1e-3)
+        return MotorSamples(
+            t, 3.0 + rng.normal(0.0, 0.05, len(t)), rng.normal(0.0, 0.2, len(t)), np.zeros(len(t))
+        )
+
+    samples = MotorSamples.concatenate([rest(0.0, 1.0), rest(1.3, 3.0)])  # a 0.3 s hole
+    assert hole_reinitialisations(samples, merge=True) == [True]
+    assert hole_reinitialisations(samples, merge=False) == [True]
 
 
 def test_maintenance_resets_the_count_and_only_what_was_replaced() -> None:

@@ -178,6 +178,31 @@ def test_a_gap_in_the_samples_starts_a_new_grid_and_spans_the_prediction() -> No
     assert after[0].duration_s > 0.8
 
 
+@pytest.mark.parametrize("size", [1, 100, 730, 2000])
+def test_a_gap_is_a_gap_whatever_the_chunking(size: int) -> None:
+    # 730: the first chunk ends 30 samples after the gap, so the blocks before it are closed
+    # and the first pending sample of the next chunk is the first one after the gap.
+    samples = run(2.0)
+    keep = np.ones(len(samples), dtype=bool)
+    keep[700:1500] = False  # 0.8 s dropout, longer than max_gap_s
+    blocks, blocker = feed_in_chunks(samples[keep], size)
+    assert [b.stamp_s for b in blocks if b.after_gap] == [
+        b.stamp_s for b in feed_in_chunks(samples[keep], len(samples))[0] if b.after_gap
+    ]
+    assert sum(b.after_gap for b in blocks) == 1 and blocker.counters.gaps == 1
+
+
+def test_a_gap_after_a_flush_is_a_gap() -> None:
+    # The node flushes when its input has been silent for a while.
+    samples = run(2.0)
+    blocker = SampleBlocker(PARAMS)
+    before = blocker.feed(samples[:700]) + blocker.flush()
+    after = blocker.feed(samples[1500:]) + blocker.flush()
+    assert not any(b.after_gap for b in before)
+    assert after[0].after_gap and not any(b.after_gap for b in after[1:])
+    assert blocker.counters.gaps == 1
+
+
 def test_standstill_and_reversal_blocks_have_no_direction() -> None:
     samples = run(1.0)
     speed = np.where(np.arange(len(samples)) < 500, 0.0, -150.0)
