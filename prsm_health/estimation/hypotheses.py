@@ -18,7 +18,7 @@ probability p = 1 - exp(-rate dt) per block, dt its duration but at most
    ``UnscentedKalmanFilter``; Joseph-form covariance update in the EKF). A fresh hypothesis
    predicts the block in which its jam starts at a uniformly random instant
    (:meth:`JamHypotheses._measurement`). While a stroke starts, an established hypothesis
-   whose ripple phase has been known is updated with its ripple in polar coordinates
+   whose ripple phase has been and is known is updated with its ripple in polar coordinates
    (:mod:`prsm_health.estimation.phasor`: the phase keeps its uncertainty when the amplitude
    shrinks as the load builds up);
 3. probabilities times the measurement likelihood N(y; 0, S). At standstill the likelihoods
@@ -173,14 +173,22 @@ def ripple_axis(
     may shrink through zero with the radial load, and must not turn the phase on the way (a
     second jammed roller does turn it).
     """
+    if moving and phase_known(ripple, covariance, phase_known_rad):
+        c, s = float(ripple[0]), float(ripple[1])
+        return np.array([c, s]) / math.sqrt(c * c + s * s)
+    return axis
+
+
+def phase_known(ripple: FloatArray, covariance: FloatArray, phase_known_rad: float) -> bool:
+    """Whether the phase of the ripple phasor r = (c, s) with covariance ``covariance`` is
+    known: its standard deviation sqrt(v' P v) / |r|^2, v = (-s, c) the direction across r,
+    is below ``phase_known_rad`` (a phasor of length zero has no phase)."""
     c, s = float(ripple[0]), float(ripple[1])
     amplitude2 = c * c + s * s
-    if moving and amplitude2 > 0.0:
-        (pcc, pcs), (psc, pss) = covariance.tolist()
-        across_var = s * s * pcc - c * s * (pcs + psc) + c * c * pss
-        if across_var < phase_known_rad**2 * amplitude2**2:
-            return np.array([c, s]) / math.sqrt(amplitude2)
-    return axis
+    (pcc, pcs), (psc, pss) = covariance.tolist()
+    across_var = max(s * s * pcc - c * s * (pcs + psc) + c * c * pss, 0.0)
+    # Compared as standard deviations: squaring amplitude2 could overflow.
+    return amplitude2 > 0.0 and math.sqrt(across_var) < phase_known_rad * amplitude2
 
 
 def ripple_walk(
@@ -477,8 +485,9 @@ class JamHypotheses:
 
         ``jerk_psd``: the load model's jerk density for this block [N^2/s^5].
         ``load_transition``: a stroke starts (or the actuator stands): the EKF updates the ripple
-        of a hypothesis whose phase has been known (its ripple axis is set) in polar
-        coordinates (:mod:`prsm_health.estimation.phasor`, :meth:`_polar_noise`).
+        of a hypothesis whose phase has been known (its ripple axis is set) and is known now
+        (:func:`phase_known`: about a phasor of uncertain phase a linearisation in polar
+        coordinates does not hold) in polar coordinates (:mod:`prsm_health.estimation.phasor`, :meth:`_polar_noise`).
         ``evidence=False``: the filters update but the probabilities are not reweighted
         (the caller knows the block cannot tell jams from load changes).
         """
@@ -490,6 +499,7 @@ class JamHypotheses:
         self._predicted = {}
         z = np.array([block.motor_torque_nm])
         polars: list[PolarPhasor | None] = []
+        phase_known_rad = self._params.model.ripple_phase_known_rad
         for h in self.hypotheses:
             kf = h.filter
             transition, noise = self._process(dt, jerk_psd)
@@ -500,9 +510,14 @@ class JamHypotheses:
                     kf.P[RIPPLE, RIPPLE],
                     h.ripple_axis,
                     moving=bool(block.direction),
-                    phase_known_rad=self._params.model.ripple_phase_known_rad,
+                    phase_known_rad=phase_known_rad,
                 )
-                if load_transition and h.ripple_axis is not None and self._ekf:
+                if (
+                    load_transition
+                    and h.ripple_axis is not None
+                    and self._ekf
+                    and phase_known(kf.x[RIPPLE], kf.P[RIPPLE, RIPPLE], phase_known_rad)
+                ):
                     polar = polar_about(kf.x)
                 if polar is None:
                     noise = self._ripple_noise(h, noise, dt)

@@ -325,6 +325,49 @@ def test_the_ripple_axis_is_kept_when_the_amplitude_shrinks_and_not_set_at_stand
     assert none is None
 
 
+def test_a_phasor_of_unknown_phase_is_not_updated_in_polar_coordinates() -> None:
+    """A jammed hypothesis whose axis is set but whose phasor has shrunk to 1e-4 with an
+    uncertainty of 0.03 across it (a phase standard deviation of 300 rad) is updated in (c, s)
+    while a stroke starts: linearised in polar coordinates there, its ripple's standard
+    deviation grew to 66 (the prior's is 0.3) and its phase locked 97 degrees off a true
+    ripple of (0.25, 0)."""
+    bank_params = EstimatorParams(
+        actuator=Actuator(preset=PRESET), model=ModelParams(jam_rate_per_h=0.0)
+    )
+    model = TorqueModel(bank_params)
+    bank = JamHypotheses(bank_params, model)
+    h = bank.hypotheses[0]
+    h.count, h.ripple_axis = 1, np.array([1.0, 0.0])
+    h.filter.x = np.array([20e3, 0.0, 0.0, 1e-4, 0.0])
+    h.filter.P = np.diag([1e4, 1e6, 1e8, 0.1**2, 0.03**2])
+    truth = np.array([20e3, 0.0, 0.0, 0.25, 0.0])
+    largest_std = 0.0
+    for b in range(25):
+        theta = 2.0 * math.pi * 2.4 * 0.04 * (b + 1)
+        block = Block(
+            stamp_s=0.04 * b,
+            duration_s=0.04,
+            samples=40,
+            motor_torque_nm=0.0,
+            motor_speed_rad_s=150.0,
+            motor_acceleration_rad_s2=0.0,
+            carrier_cos=math.cos(theta),
+            carrier_sin=math.sin(theta),
+            direction=1,
+        )
+        torque = model.predict(truth, block, 1).motor_torque_nm
+        bank.step(
+            dataclasses.replace(block, motor_torque_nm=torque),
+            jerk_psd=bank_params.model.load_jerk_psd_transition_n2_per_s5,
+            load_transition=True,
+        )
+        ripple_cov = bank.hypotheses[0].filter.P[RIPPLE, RIPPLE]
+        largest_std = max(largest_std, math.sqrt(float(np.linalg.eigvalsh(ripple_cov).max())))
+    c, s = bank.hypotheses[0].filter.x[RIPPLE]
+    assert largest_std < bank_params.model.ripple_prior_std
+    assert abs(math.degrees(math.atan2(s, c))) < 10.0
+
+
 def test_a_new_jammed_roller_adds_the_ripple_prior_to_its_parents_ripple() -> None:
     """A jam born from count k adds the new roller's ripple prior to the parent's ripple
     covariance (their phasors add). The healthy hypothesis' ripple states are never updated
