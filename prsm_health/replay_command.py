@@ -12,7 +12,10 @@ from __future__ import annotations
 
 import argparse
 import dataclasses
+import itertools
 import json
+import math
+import os
 import sys
 from pathlib import Path
 from typing import Any
@@ -47,7 +50,11 @@ def add_replay_command(commands: Any) -> None:
     parser.add_argument(
         "--joint-name", metavar="NAME", help=f"the motor joint (default {MOTOR_FRAME})"
     )
-    parser.add_argument("--effort", choices=("current", "torque"), default="current")
+    parser.add_argument(
+        "--effort",
+        choices=("current", "torque"),
+        help="what JointState.effort carries (default current)",
+    )
     parser.add_argument("--hardware-id", default="prsm_health", metavar="ID")
     parser.set_defaults(handler=run_replay)
 
@@ -77,15 +84,42 @@ def bundled_scene_of(bag: Path) -> str | None:
 
 
 def _check_outputs(args: argparse.Namespace) -> None:
-    """Refuse, before the replay, outputs that could not be written afterwards."""
+    """Refuse, before the replay, outputs that could not be written afterwards, and make the
+    folders they go into (so that a folder that cannot be made fails now, not after the
+    replay)."""
+    outputs = {
+        option: path.resolve()
+        for option, path in (
+            ("--out", args.out),
+            ("--report", args.report),
+            ("--metrics-json", args.metrics_json),
+        )
+        if path is not None
+    }
+    for (first, a), (second, b) in itertools.combinations(outputs.items(), 2):
+        if a == b or a in b.parents or b in a.parents:
+            raise ValueError(f"{second}: {b} overlaps {first} {a}")
     if args.out is not None and args.out.exists():
         raise ValueError(f"--out: {args.out} exists")
     if args.report is not None and args.report.exists() and not args.report.is_dir():
         raise ValueError(f"--report: {args.report} exists and is not a directory")
     if args.metrics_json is not None and args.metrics_json.is_dir():
         raise ValueError(f"--metrics-json: {args.metrics_json} is a directory")
-    if args.joint_name is not None and args.joint_states is None:
-        raise ValueError("--joint-name: applies only with --joint-states TOPIC")
+    for option, folder in (
+        ("--report", args.report),
+        ("--metrics-json", None if args.metrics_json is None else args.metrics_json.parent),
+    ):
+        if folder is None:
+            continue
+        try:
+            folder.mkdir(parents=True, exist_ok=True)
+        except OSError as exc:
+            raise ValueError(f"{option}: cannot make the folder {folder}: {exc}") from exc
+        if not os.access(folder, os.W_OK | os.X_OK):
+            raise ValueError(f"{option}: the folder {folder} is not writable")
+    for option, given in (("--joint-name", args.joint_name), ("--effort", args.effort)):
+        if given is not None and args.joint_states is None:
+            raise ValueError(f"{option}: applies only with --joint-states TOPIC")
 
 
 def run_replay(args: argparse.Namespace) -> int:
@@ -101,7 +135,7 @@ def run_replay(args: argparse.Namespace) -> int:
         motor_state=args.motor_state_topic,
         joint_states=args.joint_states,
         joint_name=args.joint_name or MOTOR_FRAME,
-        effort=args.effort,
+        effort=args.effort or "current",
         torque_constant_nm_per_a=(
             params.actuator.drive_train.torque_constant_nm_per_a
             if args.effort == "torque"
@@ -119,31 +153,42 @@ def run_replay(args: argparse.Namespace) -> int:
             hardware_id=args.hardware_id,
         )
     print(summary(args.bag, source, result))
-    if result.samples and not result.counters.accepted:
-        raise ValueError(
-            f"no sample of {args.bag} accepted: {_rejected_why(args.bag, topics, result)}"
-        )
+    if not result.counters.accepted:
+        why = f"no sample of {args.bag} accepted: {_rejected_why(args.bag, topics, result)}"
+        if result.damage is not None:  # the damage says more than what it left
+            print(f"  {why}")
+            return 1
+        raise ValueError(why)
     if args.metrics_json is not None:
         if result.metrics is None:
             print(f"  --metrics-json: not written, {args.bag} has no ground truth to score")
         else:
-            args.metrics_json.parent.mkdir(parents=True, exist_ok=True)
-            args.metrics_json.write_text(json.dumps(result.metrics.to_dict(), indent=2) + "\n")
+            text = json.dumps(result.metrics.to_dict(), indent=2, allow_nan=False)
+            _write("--metrics-json", args.metrics_json, text + "\n")
     if args.report is not None:
-        if not result.states:
-            print("  --report: not written, no estimates")
-        else:
-            from prsm_health.report import write_report  # matplotlib: only when a report is asked
+        from prsm_health.report import write_report  # matplotlib: only when a report is asked
 
+        try:
             write_report(
                 args.report, result.states, result.truth, result.metrics, title=args.bag.name
             )
+        except OSError as exc:
+            raise ValueError(f"--report: cannot write into {args.report}: {exc}") from exc
     return 1 if result.damage is not None else 0
+
+
+def _write(option: str, path: Path, text: str) -> None:
+    try:
+        path.write_text(text)
+    except OSError as exc:
+        raise ValueError(f"{option}: cannot write {path}: {exc}") from exc
 
 
 def _rejected_why(bag: Path, topics: InputTopics, result: ReplayResult) -> str:
     """The rejections by reason, and with JointState inputs the joints the bag names (a
     JointState without the joint gives a non-finite sample)."""
+    if not result.samples:
+        return f"no message on {topics.joint_states or topics.motor_state}"
     counts = result.counters.rejected
     why = ", ".join(f"{r.name.lower()} {counts[r]}" for r in RejectReason if counts[r])
     if topics.joint_states is None:
@@ -186,10 +231,15 @@ def summary(bag: Path, source: str, result: ReplayResult) -> str:
         delays = ", ".join(
             "never" if j.delay_s is None else f"{j.delay_s:.2f} s" for j in metrics.jams
         )
-        lines += [
-            f"  vs truth: load RMSE {metrics.load_rmse_percent_rated:.2f} % of rated "
+        load = (
+            f"load RMSE {metrics.load_rmse_percent_rated:.2f} % of rated "
             f"(max {metrics.load_max_error_n:.0f} N), NEES {metrics.load_nees_mean:.2f} "
-            f"({'consistent' if metrics.load_nees_consistent else 'NOT consistent'})",
+            f"({'consistent' if metrics.load_nees_consistent else 'NOT consistent'})"
+            if math.isfinite(metrics.load_rmse_percent_rated)
+            else "no load estimate in motion to score"
+        )
+        lines += [
+            f"  vs truth: {load}",
             f"  jams: {len(metrics.jams)} (identified after {delays or '-'}), false "
             f"declarations {metrics.false_jam_declarations}; precision loss error "
             f"{metrics.precision_loss_error_percent:.1f} %, 2-sigma coverage "

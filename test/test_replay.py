@@ -14,10 +14,10 @@ from mcap.reader import make_reader
 from mcap_ros2.reader import read_ros2_messages
 from rosbags.rosbag2 import Reader
 
-from prsm_health.bags import InputTopics, read_motor_samples
+from prsm_health.bags import MOTOR_STATE, InputTopics, read_motor_samples, read_truth
 from prsm_health.bags.topics import DIAGNOSTICS_TOPIC, HEALTH_TOPIC
 from prsm_health.bags.typestore import typestore
-from prsm_health.bags.writer import BagWriter, write_motor_states
+from prsm_health.bags.writer import BagWriter, write_motor_states, write_truth
 from prsm_health.cli import main
 from prsm_health.estimation.estimate import EstimateEvent
 from prsm_health.estimation.params import EstimatorParams
@@ -208,6 +208,15 @@ def test_cli_checks_output_paths_before_the_replay_and_makes_the_metrics_folder(
     assert "is a directory" in capsys.readouterr().err
     assert main(["replay", str(bag), "--joint-name", "j1"]) == 2
     assert "--joint-states" in capsys.readouterr().err
+    assert main(["replay", str(bag), "--effort", "torque"]) == 2
+    assert "--effort: applies only with --joint-states" in capsys.readouterr().err
+    # Checked before the replay too: these failed after it, with a traceback.
+    same = tmp_path / "same"
+    assert main(["replay", str(bag), "--out", str(same), "--metrics-json", str(same)]) == 2
+    assert "overlaps --out" in capsys.readouterr().err
+    assert main(["replay", str(bag), "--metrics-json", str(a_file / "metrics.json")]) == 2
+    captured = capsys.readouterr()
+    assert captured.out == "" and "--metrics-json: cannot make the folder" in captured.err
 
     metrics = tmp_path / "new" / "folder" / "metrics.json"
     assert main(["replay", str(bag), "--metrics-json", str(metrics)]) == 0
@@ -231,6 +240,50 @@ def test_cli_says_when_no_sample_matches_the_joint_name_and_what_is_skipped(
     assert main(["replay", str(no_truth), "--metrics-json", str(metrics)]) == 0
     assert "--metrics-json: not written" in capsys.readouterr().out
     assert not metrics.exists()
+
+
+def test_cli_ends_with_an_error_when_the_input_topic_is_empty(
+    bag: Path, tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    """The topic is declared but holds no message, the truth does: an error naming the topic
+    (it ended with exit 0 and 'no ground truth to score')."""
+    empty = tmp_path / "empty"
+    with BagWriter(empty) as writer:
+        writer.add_topic("/motor_state", MOTOR_STATE)
+        write_truth(writer, read_truth(bag))
+    assert main(["replay", str(empty), "--metrics-json", str(tmp_path / "m.json")]) == 2
+    assert "no message on /motor_state" in capsys.readouterr().err
+
+
+def test_cli_reports_damage_first_when_nothing_before_it_was_accepted(
+    bag: Path, tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    """Cut before its first message: the damage's exit code (1), and what it left said."""
+    damaged = tmp_path / "cut"
+    shutil.copytree(bag, damaged)
+    mcap = next(damaged.glob("*.mcap"))
+    mcap.write_bytes(mcap.read_bytes()[:100])
+    assert main(["replay", str(damaged)]) == 1
+    out = capsys.readouterr().out
+    assert "DAMAGED" in out and "no sample of" in out
+
+
+def test_metrics_that_cannot_be_computed_are_null_in_the_json(
+    tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    """0.3 s at standstill: no estimate in motion, so no load RMSE or NEES. JSON has no NaN
+    (json.dumps wrote a bare NaN, which strict parsers refuse)."""
+    short = tmp_path / "short"
+    record(Simulator(scene_from_mapping({**SCENE, "duration_s": 0.3, "jams": []})), short)
+    metrics = tmp_path / "metrics.json"
+    assert main(["replay", str(short), "--metrics-json", str(metrics)]) == 0
+    assert "vs truth: no load estimate in motion to score" in capsys.readouterr().out
+
+    def refuse(constant: str) -> None:
+        raise ValueError(f"not JSON: {constant}")
+
+    scores = json.loads(metrics.read_text(), parse_constant=refuse)
+    assert scores["load_rmse_n"] is None and scores["load_nees_mean"] is None
 
 
 def test_params_with_another_block_size_still_replay(bag: Path) -> None:

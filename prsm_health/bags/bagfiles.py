@@ -51,10 +51,17 @@ def bag_files(path: str | Path) -> BagFiles:
     """The storage files of the bag at ``path`` (directory or ``.mcap`` file), in order.
 
     Raises:
-        BagError: the path does not exist, the directory has no (valid) metadata.yaml, a storage
-            file is missing, or the storage is not plain MCAP.
+        BagError: the path does not exist or cannot be read, the directory has no (valid)
+            metadata.yaml, a storage file is missing, or the storage is not plain MCAP.
     """
     bag = Path(path)
+    try:
+        return _bag_files(bag)
+    except OSError as exc:  # e.g. a directory without read permission: stat inside it fails
+        raise BagError(bag, f"cannot read: {exc.strerror or exc}") from exc
+
+
+def _bag_files(bag: Path) -> BagFiles:
     if bag.is_file():
         if bag.suffix != ".mcap":
             raise BagError(bag, "not a .mcap file or a rosbag2 bag directory")

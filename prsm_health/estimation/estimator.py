@@ -188,8 +188,9 @@ class HealthEstimator:
             raise SnapshotError(f"malformed state: {exc!r}") from exc
         if not any(math.isfinite(state[4]) for state in states):
             raise SnapshotError("no hypothesis with a probability above zero")
-        if not all(math.isfinite(v) for v in degradation.to_dict().values()):
-            raise SnapshotError("non-finite degradation values")
+        # Losses, damages, their error terms and the rate only ever grow from zero.
+        if not all(0.0 <= v < math.inf for v in degradation.to_dict().values()):
+            raise SnapshotError(f"degradation values must be finite and >= 0: {degradation}")
         if len(rejected) != len(self.counters.rejected) or accepted < 0 or min(rejected) < 0:
             raise SnapshotError(
                 f"sample counters: {len(self.counters.rejected)} rejection reasons expected, "

@@ -487,7 +487,8 @@ class JamHypotheses:
         ``load_transition``: a stroke starts (or the actuator stands): the EKF updates the ripple
         of a hypothesis whose phase has been known (its ripple axis is set) and is known now
         (:func:`phase_known`: about a phasor of uncertain phase a linearisation in polar
-        coordinates does not hold) in polar coordinates (:mod:`prsm_health.estimation.phasor`, :meth:`_polar_noise`).
+        coordinates does not hold) in polar coordinates (:mod:`prsm_health.estimation.phasor`,
+        :meth:`_polar_noise`).
         ``evidence=False``: the filters update but the probabilities are not reweighted
         (the caller knows the block cannot tell jams from load changes).
         """

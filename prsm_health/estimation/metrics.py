@@ -83,10 +83,22 @@ class Metrics:
     clock_offsets_s: tuple[float, ...] = ()
 
     def to_dict(self) -> dict[str, object]:
-        """JSON-able form (``--metrics-json``)."""
+        """JSON-able form (``--metrics-json``): a value that could not be computed (NaN, e.g. a
+        load RMSE without an estimate in motion) is null, which JSON has and NaN is not."""
         data = asdict(self)
         data["jams"] = [asdict(j) for j in self.jams]
-        return data
+        return {key: _json_value(value) for key, value in data.items()}
+
+
+def _json_value(value: object) -> object:
+    """``value`` with every non-finite float in it replaced by None."""
+    if isinstance(value, float):
+        return value if math.isfinite(value) else None
+    if isinstance(value, (list, tuple)):
+        return [_json_value(v) for v in value]
+    if isinstance(value, dict):
+        return {k: _json_value(v) for k, v in value.items()}
+    return value
 
 
 def _truth_at(truth: TruthSamples, stamps: FloatArray) -> NDArray[np.int64]:

@@ -204,6 +204,10 @@ def test_errors_name_the_file_and_what_is_wrong(tmp_path: Path) -> None:
         read_motor_samples(bag)
     with pytest.raises(BagError, match="no such bag"):
         read_motor_samples(tmp_path / "nothing")
+    # A path the system cannot even look at (here: a name too long; as well a directory
+    # without read permission) is a BagError too, not an OSError from deep inside pathlib.
+    with pytest.raises(BagError, match="cannot read: File name too long"):
+        read_motor_samples(tmp_path / ("x" * 300) / "bag")
     (tmp_path / "x.txt").write_text("")
     with pytest.raises(BagError, match=r"not a \.mcap file"):
         read_motor_samples(tmp_path / "x.txt")

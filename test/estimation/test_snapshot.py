@@ -69,6 +69,9 @@ def test_a_state_of_another_actuator_is_refused() -> None:
         lambda s: s["hypotheses"][0].update(x=[1.0]),
         lambda s: s["hypotheses"][0].update(P=[[float("nan")] * 5] * 5),
         lambda s: s["degradation"].update(precision_loss_m="a lot"),
+        # Losses and damages only grow from zero: the estimate would report a negative loss.
+        lambda s: s["degradation"].update(precision_loss_m=-1.0),
+        lambda s: s["degradation"].update(fatigue_damage=-5.0),
         lambda s: s.update(format=99),
         lambda s: s["hypotheses"][0].update(ripple_axis=[0.0, 2.0]),
         # Parsed by json.loads; the probabilities would all become NaN.
@@ -86,6 +89,24 @@ def test_a_malformed_state_is_refused(damage: object) -> None:
     damage(saved)  # type: ignore[operator]
     with pytest.raises(SnapshotError):
         HealthEstimator(params()).restore(saved)
+
+
+def test_a_restored_ripple_far_beyond_its_prior_gives_finite_estimates() -> None:
+    """Ripple states of 1e80 are within the snapshot's bounds; judging their phase squared
+    their amplitude twice and overflowed (OverflowError in the next block)."""
+    estimator = HealthEstimator(params())
+    n = 3000
+    t = np.arange(n) / 1000.0
+    speed = np.full(n, 300.0)
+    samples = MotorSamples(t, np.full(n, 10.0) + 0.05 * np.sin(t), speed, 300.0 * t)
+    estimator.process(samples[:1500])
+    saved = estimator.snapshot()
+    for h in saved["hypotheses"]:
+        h["x"][3] = h["x"][4] = 1e80
+    restored = HealthEstimator(params())
+    restored.restore(saved)
+    states = restored.process(samples[1500:]) + restored.finish()
+    assert states and all(math.isfinite(s.axial_load_n) for s in states)
 
 
 def test_an_unpruned_bank_with_ruled_out_counts_is_saved_and_restored() -> None:
