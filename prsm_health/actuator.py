@@ -23,7 +23,12 @@ from numpy.typing import ArrayLike, NDArray
 
 from prsm_health.config import build_dataclass
 from prsm_health.physics.errors import ParameterError
-from prsm_health.physics.geometry import Misalignment, require, require_finite_positive
+from prsm_health.physics.geometry import (
+    Misalignment,
+    require,
+    require_finite_positive,
+    require_real,
+)
 from prsm_health.physics.load_distribution import LoadingCase
 from prsm_health.physics.presets import Preset, load_preset
 
@@ -55,8 +60,8 @@ class DriveTrain:
     max_current_a: float = 60.0
 
     def __post_init__(self) -> None:
-        require_finite_positive(self, "drive_train")
-        require(self.gear_efficiency <= 1.0, "drive_train.gear_efficiency", "must be <= 1")
+        require_finite_positive(self, "actuator.drive_train")
+        require(self.gear_efficiency <= 1.0, "actuator.drive_train.gear_efficiency", "must be <= 1")
 
     @property
     def inertia_at_motor_kg_m2(self) -> float:
@@ -122,11 +127,9 @@ class Actuator:
     wear_acceleration: float = 1.0
 
     def __post_init__(self) -> None:
-        require(
-            math.isfinite(self.wear_acceleration) and self.wear_acceleration > 0.0,
-            "actuator.wear_acceleration",
-            f"must be finite and > 0, got {self.wear_acceleration!r}",
-        )
+        scale = require_real(self.wear_acceleration, "actuator.wear_acceleration")
+        require(scale > 0.0, "actuator.wear_acceleration", f"must be > 0, got {scale!r}")
+        object.__setattr__(self, "wear_acceleration", scale)
 
     def loading_case(self, motor_speed_rad_s: float) -> LoadingCase:
         """The loading case for the motor's direction of rotation (forward at standstill)."""
@@ -149,6 +152,19 @@ def _case(value: object, name: str) -> LoadingCase:
     return LoadingCase(value)
 
 
+def _misalignment(tilt: object) -> Misalignment:
+    """``misalignment_arcmin: [x, y]``: two finite numbers (not bools), in arc minutes; every
+    error names the key the user wrote, not Misalignment's fields in radians."""
+    name = "actuator.misalignment_arcmin"
+    if not (isinstance(tilt, list) and len(tilt) == 2):
+        raise ParameterError(name, f"must be [x, y] in arc minutes, got {tilt!r}")
+    x, y = (require_real(value, f"{name}[{i}]") for i, value in enumerate(tilt))
+    try:
+        return Misalignment.from_arcmin(x, y)
+    except ParameterError as exc:  # beyond the small-angle limit
+        raise ParameterError(name, f"{tilt!r} arc minutes: {exc}") from exc
+
+
 def actuator_from_mapping(data: object) -> Actuator:
     """Build an :class:`Actuator` from the ``actuator:`` section of a scene or params file.
 
@@ -166,17 +182,11 @@ def actuator_from_mapping(data: object) -> Actuator:
     if "preset" not in data:
         raise ParameterError("actuator.preset", "missing")
     drive_train = build_dataclass(DriveTrain, data.get("drive_train"), "actuator.drive_train")
-    tilt = data.get("misalignment_arcmin", [0.0, 0.0])
-    if not (isinstance(tilt, list) and len(tilt) == 2):
-        raise ParameterError("actuator.misalignment_arcmin", f"must be [x, y], got {tilt!r}")
-    scale = data.get("wear_acceleration", 1.0)
-    if isinstance(scale, bool) or not isinstance(scale, int | float):
-        raise ParameterError("actuator.wear_acceleration", f"must be a number, got {scale!r}")
     return Actuator(
         preset=load_preset(str(data["preset"])),
         drive_train=drive_train,
-        misalignment=Misalignment.from_arcmin(float(tilt[0]), float(tilt[1])),
+        misalignment=_misalignment(data.get("misalignment_arcmin", [0.0, 0.0])),
         case_forward=_case(data.get("case_forward", 2), "actuator.case_forward"),
         case_reverse=_case(data.get("case_reverse", 1), "actuator.case_reverse"),
-        wear_acceleration=float(scale),
+        wear_acceleration=data.get("wear_acceleration", 1.0),
     )

@@ -22,6 +22,29 @@ def _check_lengths(obj: object) -> None:
         raise ValueError(f"{type(obj).__name__}: fields differ in length: {lengths}")
 
 
+#: numpy dtype kinds of real numbers: float, signed and unsigned integer (the bag reader and the
+#: node give float64; the estimator also takes float32, float16 and integer columns).
+_REAL_KINDS = ("f", "i", "u")
+_FLOAT64 = np.dtype(np.float64)
+
+
+def _check_columns(obj: object) -> None:
+    """Name the first field of ``obj`` that is not a 1-D array of real numbers, then check the
+    lengths (the slow path of MotorSamples' validation, only on a failure)."""
+    for f in fields(obj):  # type: ignore[arg-type]
+        value = getattr(obj, f.name)
+        where = f"{type(obj).__name__}.{f.name}"
+        if not isinstance(value, np.ndarray):
+            raise ValueError(f"{where}: must be a numpy array, got {type(value).__name__}")
+        if value.ndim != 1:
+            raise ValueError(
+                f"{where}: must be 1-D (one entry per sample), got shape {value.shape}"
+            )
+        if value.dtype.kind not in _REAL_KINDS:
+            raise ValueError(f"{where}: must hold real numbers, got dtype {value.dtype}")
+    _check_lengths(obj)
+
+
 @dataclass(frozen=True)
 class MotorSamples:
     """Motor measurements, one entry per sample (``prsm_health_msgs/MotorState``).
@@ -38,10 +61,26 @@ class MotorSamples:
     position_rad: FloatArray
 
     def __post_init__(self) -> None:
-        # Direct (not through dataclasses.fields): the node builds one per few samples.
-        n = len(self.stamp_s)
-        if not len(self.current_a) == len(self.speed_rad_s) == len(self.position_rad) == n:
-            _check_lengths(self)
+        """Every field a 1-D numpy array of real numbers (float or integer dtype), all of one
+        length; else a ValueError naming the field and the problem (the estimator would fail
+        deep inside on a column of shape (n, 1), of objects, or a list)."""
+        # Built per chunk in the hot paths (the node: one per few samples), so the common case,
+        # four float64 columns, is checked directly (about 0.4 us a call); the rest field by field.
+        s, c, v, p = self.stamp_s, self.current_a, self.speed_rad_s, self.position_rad
+        array = np.ndarray
+        if not (
+            isinstance(s, array)
+            and isinstance(c, array)
+            and isinstance(v, array)
+            and isinstance(p, array)
+            and s.ndim == 1
+            and s.shape == c.shape == v.shape == p.shape
+            and s.dtype is _FLOAT64
+            and c.dtype is _FLOAT64
+            and v.dtype is _FLOAT64
+            and p.dtype is _FLOAT64
+        ):
+            _check_columns(self)
 
     def __len__(self) -> int:
         return len(self.stamp_s)

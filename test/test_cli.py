@@ -6,6 +6,7 @@ import json
 import os
 import subprocess
 import sys
+from pathlib import Path
 
 import pytest
 
@@ -109,3 +110,67 @@ def test_a_reader_that_left_ends_the_output_quietly() -> None:
         os.close(write_end)
     assert result.returncode == 141, result.stderr
     assert b"Traceback" not in result.stderr
+
+
+BIG = "1" + "0" * 400
+
+
+@pytest.mark.parametrize(
+    ("text", "expected"),
+    [
+        (
+            f"actuator: {{preset: dong2022-downhole}}\nnoise: {{current_std_a: {BIG}}}\n",
+            "noise.current_std_a: must be a finite number, got an integer of about 401 digits",
+        ),
+        (
+            "actuator: {preset: dong2022-downhole, misalignment_arcmin: [null, 0]}\n",
+            "actuator.misalignment_arcmin[0]: must be a number, got None",
+        ),
+        (
+            "actuator: {preset: dong2022-downhole}\nmodel: {initial_jammed_rollers: true}\n",
+            "model.initial_jammed_rollers: must be an integer >= 0, got True",
+        ),
+        (
+            "actuator: {preset: dong2022-downhole}\nnoise: {}\nnoise: {current_std_a: 99}\n",
+            "params.yaml, line 3, column 1: duplicate key 'noise' (first on line 2)",
+        ),
+        ("actuator: {preset: [\n", "params.yaml, line 2, column 1: while parsing a flow"),
+    ],
+)
+def test_a_bad_params_file_gives_one_line_and_exit_2(
+    capsys: pytest.CaptureFixture[str], tmp_path: Path, text: str, expected: str
+) -> None:
+    """The params are read before the bag, so no bag is needed."""
+    path = tmp_path / "params.yaml"
+    path.write_text(text, encoding="utf-8")
+    code, _, err = run(capsys, "replay", str(tmp_path / "no-bag"), "--params", str(path))
+    assert code == 2
+    assert len(err.strip().splitlines()) == 1
+    assert err.startswith("prsm-health: error: ") and expected in err
+
+
+def test_a_params_file_that_is_not_utf8_is_named(
+    capsys: pytest.CaptureFixture[str], tmp_path: Path
+) -> None:
+    path = tmp_path / "latin1.yaml"
+    path.write_bytes(b"actuator: {preset: dong\xe9}\n")
+    code, _, err = run(capsys, "replay", str(tmp_path / "no-bag"), "--params", str(path))
+    assert code == 2
+    assert (
+        err == f"prsm-health: error: --params: {path}, line 1: not UTF-8 text (byte 0xe9); "
+        "save the file as UTF-8\n"
+    )
+
+
+def test_a_bad_preset_file_names_the_file_and_the_key(
+    capsys: pytest.CaptureFixture[str], tmp_path: Path
+) -> None:
+    bundled = Path(__file__).parents[1] / "prsm_health/physics/presets/dong2022-downhole.yaml"
+    path = tmp_path / "tiny-load.yaml"
+    path.write_text(
+        bundled.read_text().replace("largest_axial_load_n: 55000.0", "largest_axial_load_n: 1e-300")
+    )
+    code, _, err = run(capsys, "model", "--preset", str(path), "--axial-load", "1000")
+    assert code == 2
+    assert len(err.strip().splitlines()) == 1
+    assert f"{path}: largest_axial_load_n: must be at least 1 N" in err

@@ -24,7 +24,7 @@ from typing import Any, Literal
 from prsm_health.actuator import Actuator, actuator_from_mapping
 from prsm_health.config import build_dataclass
 from prsm_health.physics.errors import ParameterError
-from prsm_health.physics.geometry import require
+from prsm_health.physics.geometry import require, require_integer, require_real
 from prsm_health.yamlio import YamlError, load_yaml_mapping
 
 #: The NIS divergence test needs at least this many blocks in its window
@@ -37,24 +37,16 @@ RATED_LOAD_FACTOR = 10.0
 
 
 def _require_ranges(obj: object, prefix: str, ranges: dict[str, tuple[float, float]]) -> None:
-    """Every named field is a finite number inside its closed range [low, high]."""
+    """Every named field is a finite number (:func:`require_real`) inside its closed range
+    [low, high]; it is stored as a float."""
     for f in fields(obj):  # type: ignore[arg-type]
         if f.name not in ranges:
             continue
-        value = getattr(obj, f.name)
         low, high = ranges[f.name]
         name = f"{prefix}.{f.name}"
-        require(
-            isinstance(value, int | float) and not isinstance(value, bool),
-            name,
-            f"must be a number, got {value!r}",
-        )
-        require(
-            math.isfinite(value) and low <= value <= high,
-            name,
-            f"must be in [{low:g}, {high:g}], got {value!r}",
-        )
-        object.__setattr__(obj, f.name, float(value))
+        value = require_real(getattr(obj, f.name), name)
+        require(low <= value <= high, name, f"must be in [{low:g}, {high:g}], got {value!r}")
+        object.__setattr__(obj, f.name, value)
 
 
 @dataclass(frozen=True, kw_only=True)
@@ -152,11 +144,7 @@ class ModelParams:
                 "wear_coefficient_sigma_ln": (0.0, 5.0),
             },
         )
-        require(
-            isinstance(self.initial_jammed_rollers, int) and self.initial_jammed_rollers >= 0,
-            "model.initial_jammed_rollers",
-            f"must be an integer >= 0, got {self.initial_jammed_rollers!r}",
-        )
+        require_integer(self.initial_jammed_rollers, "model.initial_jammed_rollers", 0)
 
 
 @dataclass(frozen=True, kw_only=True)
@@ -229,13 +217,7 @@ class FilterParams:
             f"must hold at least {MIN_BLOCKS_FOR_DIVERGENCE} blocks ({shortest:g} s), got "
             f"{self.divergence_window_s:g} (a shorter window never judges divergence)",
         )
-        require(
-            isinstance(self.components_per_count, int)
-            and not isinstance(self.components_per_count, bool)
-            and 1 <= self.components_per_count <= 8,
-            "filter.components_per_count",
-            f"must be an integer in [1, 8], got {self.components_per_count!r}",
-        )
+        require_integer(self.components_per_count, "filter.components_per_count", 1, 8)
 
 
 FilterKind = Literal["ekf", "ukf"]
@@ -265,7 +247,12 @@ class Fidelity:
 
     def __post_init__(self) -> None:
         for name in ("surrogate", "skip_standstill", "prune_hypotheses", "merge_standstill_blocks"):
-            require(isinstance(getattr(self, name), bool), f"fidelity.{name}", "must be a bool")
+            value = getattr(self, name)
+            require(
+                isinstance(value, bool),
+                f"fidelity.{name}",
+                f"must be true or false, got {value!r}",
+            )
         require(
             self.radial_terms in ("auto", "on", "off"),
             "fidelity.radial_terms",

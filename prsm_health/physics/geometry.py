@@ -19,26 +19,63 @@ def require(ok: bool, name: str, message: str) -> None:
         raise ParameterError(name, message)
 
 
+def _shown(value: object) -> str:
+    """``repr(value)`` for an error message, except an integer too long for one line."""
+    if isinstance(value, int) and abs(value) >= 10**20:  # repr fails beyond 4300 digits
+        return f"an integer of about {int(value.bit_length() * math.log10(2)) + 1} digits"
+    return repr(value)
+
+
+def require_real(value: object, name: str) -> float:
+    """``value`` as a float, refused by ``name`` unless it is a finite int or float.
+
+    The one check of every real-valued parameter, whatever its range: refuses a string or
+    null from a data file, a bool (YAML's ``true`` is no number, though Python counts it as
+    1), NaN and infinities, and an integer too large for a float (YAML reads 400 digits as an
+    int, which float() refuses with an OverflowError).
+    """
+    if isinstance(value, bool) or not isinstance(value, int | float):
+        raise ParameterError(name, f"must be a number, got {_shown(value)}")
+    try:
+        number = float(value)
+    except OverflowError:
+        number = math.inf
+    require(math.isfinite(number), name, f"must be a finite number, got {_shown(value)}")
+    return number
+
+
+def require_integer(value: object, name: str, low: int, high: int | None = None) -> int:
+    """``value``, refused by ``name`` unless it is an int in [low, high] (no upper bound when
+    ``high`` is None).
+
+    The one check of every integer parameter. A bool is refused although Python counts it as
+    an int: YAML's ``true`` is no count, and numpy takes a bool where an index was meant as a
+    mask (a jam count of True would select every hypothesis).
+    """
+    if (
+        isinstance(value, bool)
+        or not isinstance(value, int)
+        or value < low
+        or (high is not None and value > high)
+    ):
+        in_range = f"in [{low}, {high}]" if high is not None else f">= {low}"
+        raise ParameterError(name, f"must be an integer {in_range}, got {_shown(value)}")
+    return value
+
+
 def require_finite_positive(obj: object, prefix: str) -> None:
     """Every ``float`` field of the frozen dataclass ``obj`` must be a finite number > 0.
 
     Integers are accepted and stored as floats; anything else (a string from a data file, a
-    bool) is refused with the field's name.
+    bool) is refused with the field's name (:func:`require_real`).
     """
     for f in fields(obj):  # type: ignore[arg-type]
         if f.type not in (float, "float"):
             continue
-        value = getattr(obj, f.name)
         name = f"{prefix}.{f.name}"
-        require(
-            isinstance(value, int | float) and not isinstance(value, bool),
-            name,
-            f"must be a number, got {value!r}",
-        )
-        require(
-            math.isfinite(value) and value > 0.0, name, f"must be finite and > 0, got {value!r}"
-        )
-        object.__setattr__(obj, f.name, float(value))
+        value = require_real(getattr(obj, f.name), name)
+        require(value > 0.0, name, f"must be > 0, got {value!r}")
+        object.__setattr__(obj, f.name, value)
 
 
 @dataclass(frozen=True, kw_only=True)
@@ -67,6 +104,13 @@ class Material:
     def shear_modulus_pa(self) -> float:
         """G = E / (2 (1 + nu))."""
         return self.youngs_modulus_pa / (2.0 * (1.0 + self.poisson_ratio))
+
+
+#: Upper bounds of the geometry's counts: far beyond any PRSM built (5 to 14 rollers, a few
+#: starts, tens of threads) yet small enough that the model's (n_rollers, n_threads) arrays
+#: and the lead (starts times pitch) stay computable; a count of 10**400 would otherwise fail
+#: deep in the physics with an OverflowError or an array too large to allocate.
+_COUNT_LIMITS = {"screw_starts": 100, "nut_starts": 100, "n_rollers": 100, "n_threads": 1000}
 
 
 @dataclass(frozen=True, kw_only=True)
@@ -100,13 +144,8 @@ class Geometry:
 
     def __post_init__(self) -> None:
         require_finite_positive(self, "geometry")
-        for name in ("screw_starts", "nut_starts", "n_rollers", "n_threads"):
-            value = getattr(self, name)
-            require(
-                isinstance(value, int) and value >= 1,
-                f"geometry.{name}",
-                f"must be an integer >= 1, got {value!r}",
-            )
+        for name, high in _COUNT_LIMITS.items():
+            require_integer(getattr(self, name), f"geometry.{name}", 1, high)
         require(
             self.flank_angle_rad < math.pi / 2,
             "geometry.flank_angle_rad",
@@ -221,8 +260,8 @@ class Misalignment:
     def __post_init__(self) -> None:
         limit = math.radians(1.0)
         for f in fields(self):
-            value = getattr(self, f.name)
-            require(math.isfinite(value), f"misalignment.{f.name}", f"not finite: {value!r}")
+            value = require_real(getattr(self, f.name), f"misalignment.{f.name}")
+            object.__setattr__(self, f.name, value)
         for name in ("tilt_x_rad", "tilt_y_rad"):
             value = getattr(self, name)
             require(

@@ -60,6 +60,11 @@ class WearParameters:
         require(self.model in ("archard", "fractal"), "wear.model", "must be archard or fractal")
 
 
+#: Smallest ``reference_cycles`` (N_0) accepted: a reference life of less than one stress
+#: cycle has no physical meaning, and near 1e-300 the damage rate overflows.
+MIN_REFERENCE_CYCLES = 1.0
+
+
 @dataclass(frozen=True, kw_only=True)
 class FatigueParameters:
     """Stress-life fatigue of paper 000 eq. 29: N_s = k_alpha^m_s N_0.
@@ -78,3 +83,9 @@ class FatigueParameters:
 
     def __post_init__(self) -> None:
         require_finite_positive(self, "fatigue")
+        require(
+            self.reference_cycles >= MIN_REFERENCE_CYCLES,
+            "fatigue.reference_cycles",
+            f"must be at least {MIN_REFERENCE_CYCLES:g} (a life of less than one stress cycle "
+            f"means nothing, and the damage rate divides by it), got {self.reference_cycles!r}",
+        )

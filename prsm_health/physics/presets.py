@@ -14,7 +14,7 @@ from typing import Any
 
 from prsm_health.config import build_dataclass
 from prsm_health.physics.errors import ParameterError
-from prsm_health.physics.geometry import Geometry, Material, require
+from prsm_health.physics.geometry import Geometry, Material, require, require_real
 from prsm_health.physics.parameters import FatigueParameters, FrictionParameters, WearParameters
 from prsm_health.yamlio import YamlError, load_yaml_mapping
 
@@ -24,6 +24,12 @@ PRESET_NAMES = (
     "li2020-jamming",
     "meng2022-misalignment",
 )
+
+
+#: Smallest ``largest_axial_load_n`` accepted. A PRSM's operating range reaches kN to hundreds
+#: of kN; the load tables and the filter's scales are fractions of this load, and at 1e-300 N
+#: they underflow (a ZeroDivisionError mid-replay). 1 N is far below any real actuator.
+MIN_AXIAL_LOAD_N = 1.0
 
 
 @dataclass(frozen=True, kw_only=True)
@@ -41,22 +47,33 @@ class Preset:
     largest_speed_rpm: float
 
     def __post_init__(self) -> None:
-        require(self.largest_axial_load_n > 0, "largest_axial_load_n", "must be > 0")
-        require(self.largest_radial_load_n >= 0, "largest_radial_load_n", "must be >= 0")
-        require(self.largest_speed_rpm > 0, "largest_speed_rpm", "must be > 0")
-
-
-def _number(data: dict[str, Any], key: str) -> float:
-    value = data[key]
-    if isinstance(value, bool) or not isinstance(value, int | float):
-        raise ParameterError(key, f"must be a number, got {value!r}")
-    return float(value)
+        axial = require_real(self.largest_axial_load_n, "largest_axial_load_n")
+        require(
+            axial >= MIN_AXIAL_LOAD_N,
+            "largest_axial_load_n",
+            f"must be at least {MIN_AXIAL_LOAD_N:g} N (the load tables and the filter's scales "
+            f"are fractions of it), got {axial!r}",
+        )
+        radial = require_real(self.largest_radial_load_n, "largest_radial_load_n")
+        require(radial >= 0.0, "largest_radial_load_n", f"must be >= 0 N, got {radial!r}")
+        speed = require_real(self.largest_speed_rpm, "largest_speed_rpm")
+        require(speed > 0.0, "largest_speed_rpm", f"must be > 0 rpm, got {speed!r}")
+        for name, value in (
+            ("largest_axial_load_n", axial),
+            ("largest_radial_load_n", radial),
+            ("largest_speed_rpm", speed),
+        ):
+            object.__setattr__(self, name, value)
 
 
 def preset_from_mapping(data: dict[str, Any]) -> Preset:
     """Validate a parsed preset document and build the :class:`Preset`."""
     try:
-        geometry_section = dict(data["geometry"])
+        geometry_section = data["geometry"]
+        if not isinstance(geometry_section, dict):
+            kind = type(geometry_section).__name__
+            raise ParameterError("geometry", f"must be a mapping, got {kind}")
+        geometry_section = dict(geometry_section)
         materials = {
             part: build_dataclass(Material, geometry_section.pop(part, {}), f"geometry.{part}")
             for part in ("screw", "roller", "nut")
@@ -68,9 +85,9 @@ def preset_from_mapping(data: dict[str, Any]) -> Preset:
             friction=build_dataclass(FrictionParameters, data.get("friction"), "friction"),
             wear=build_dataclass(WearParameters, data.get("wear"), "wear"),
             fatigue=build_dataclass(FatigueParameters, data.get("fatigue"), "fatigue"),
-            largest_axial_load_n=_number(data, "largest_axial_load_n"),
-            largest_radial_load_n=_number(data, "largest_radial_load_n"),
-            largest_speed_rpm=_number(data, "largest_speed_rpm"),
+            largest_axial_load_n=data["largest_axial_load_n"],
+            largest_radial_load_n=data["largest_radial_load_n"],
+            largest_speed_rpm=data["largest_speed_rpm"],
         )
     except KeyError as exc:
         raise ParameterError(str(exc.args[0]), "missing from the preset") from exc
@@ -82,6 +99,9 @@ def load_preset_file(path: Path) -> Preset:
         return preset_from_mapping(load_yaml_mapping(path))
     except YamlError as exc:
         raise ParameterError("preset", str(exc)) from exc
+    except ParameterError as exc:  # a bad value: say which file holds it
+        message = str(exc).removeprefix(f"{exc.field}: ")
+        raise ParameterError(f"{path}: {exc.field}", message) from exc
 
 
 @cache

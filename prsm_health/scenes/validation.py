@@ -8,11 +8,11 @@ dotted name, so an error reads e.g. ``profile.speed_rpm: must be > 0, got -3.0``
 
 from __future__ import annotations
 
-import math
 from typing import Any, TypeVar
 
 from prsm_health.config import build_dataclass
 from prsm_health.physics.errors import ParameterError
+from prsm_health.physics.geometry import require_real
 
 T = TypeVar("T")
 
@@ -29,15 +29,12 @@ def checked_number(
 
     ``low`` is inclusive unless ``open_low``; ``high`` is inclusive.
     """
-    if isinstance(value, bool) or not isinstance(value, int | float):
-        raise ParameterError(name, f"must be a number, got {value!r}")
-    if not math.isfinite(value):
-        raise ParameterError(name, f"must be finite, got {value!r}")
+    value = require_real(value, name)
     if low is not None and (value <= low if open_low else value < low):
         raise ParameterError(name, f"must be {'>' if open_low else '>='} {low:g}, got {value!r}")
     if high is not None and value > high:
         raise ParameterError(name, f"must be <= {high:g}, got {value!r}")
-    return float(value)
+    return value
 
 
 def number(

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import dataclasses
+import math
 import re
 from pathlib import Path
 
@@ -152,3 +153,102 @@ def test_docs_list_every_parameter_with_its_default() -> None:
     assert sorted(rows) == sorted(expected)
     for key, default in expected.items():
         assert _documented_value(rows[key]) == default, key
+
+
+DOWNHOLE = {"preset": "dong2022-downhole"}
+#: An integer no float can hold: YAML reads 400 digits as an int.
+HUGE = 10**400
+
+
+@pytest.mark.parametrize(
+    ("document", "field"),
+    [
+        ({"noise": {"current_std_a": HUGE}}, "noise.current_std_a"),
+        ({"model": {"wear_coefficient_factor": -HUGE}}, "model.wear_coefficient_factor"),
+        ({"fidelity": {"standstill_block_s": HUGE}}, "fidelity.standstill_block_s"),
+        ({"diagnostics": {"rated_load_n": HUGE}}, "diagnostics.rated_load_n"),
+        ({"actuator": DOWNHOLE | {"wear_acceleration": HUGE}}, "actuator.wear_acceleration"),
+        (
+            {"actuator": DOWNHOLE | {"drive_train": {"gear_ratio": HUGE}}},
+            "actuator.drive_train.gear_ratio",
+        ),
+        (
+            {"actuator": DOWNHOLE | {"misalignment_arcmin": [HUGE, 0]}},
+            "actuator.misalignment_arcmin[0]",
+        ),
+    ],
+)
+def test_an_integer_too_large_for_a_float_is_refused_naming_the_key(
+    document: dict[str, object], field: str
+) -> None:
+    """Was an OverflowError ("int too large to convert to float") with a traceback."""
+    document = {"actuator": DOWNHOLE} | document
+    with pytest.raises(ParameterError, match=rf"^{re.escape(field)}: must be a finite number"):
+        params_from_mapping(document)
+
+
+@pytest.mark.parametrize(
+    "tilt",
+    [[None, 0], [[1], 0], ["abc", 0], [True, 0], [0, False], [math.nan, 0], [0, math.inf]],
+)
+def test_misalignment_elements_must_be_finite_numbers(tilt: list[object]) -> None:
+    """[null, 0] and [[1], 0] were TypeErrors, [abc, 0] did not name the key, [true, 0] was
+    taken as one arc minute."""
+    document = {"actuator": DOWNHOLE | {"misalignment_arcmin": tilt}}
+    with pytest.raises(ParameterError, match=r"^actuator\.misalignment_arcmin\[[01]\]: must be a"):
+        params_from_mapping(document)
+
+
+def test_a_misalignment_beyond_the_small_angle_limit_names_the_key_in_arc_minutes() -> None:
+    document = {"actuator": DOWNHOLE | {"misalignment_arcmin": [90, 0]}}
+    with pytest.raises(ParameterError, match=r"^actuator\.misalignment_arcmin: \[90, 0\] arc"):
+        params_from_mapping(document)
+
+
+@pytest.mark.parametrize(
+    ("section", "key"), [("model", "initial_jammed_rollers"), ("filter", "components_per_count")]
+)
+def test_integer_parameters_refuse_bools(section: str, key: str) -> None:
+    """initial_jammed_rollers: true was accepted as 1, and numpy took it as a mask: every jam
+    count equally likely."""
+    with pytest.raises(ParameterError, match=rf"^{section}\.{key}: must be an integer"):
+        params_from_mapping({"actuator": DOWNHOLE, section: {key: True}})
+
+
+def test_radial_terms_on_and_off_read_as_written(tmp_path: Path) -> None:
+    """YAML 1.1 read on/off as booleans, so the listed values were refused as True/False."""
+    path = tmp_path / "params.yaml"
+    for word in ("on", "off", "auto"):
+        path.write_text(
+            f"actuator: {{preset: dong2022-downhole}}\nfidelity: {{radial_terms: {word}}}\n"
+        )
+        assert load_params(path).fidelity.radial_terms == word
+    path.write_text("actuator: {preset: dong2022-downhole}\nfidelity: {surrogate: no}\n")
+    with pytest.raises(
+        ParameterError, match=r"fidelity\.surrogate: must be true or false, got 'no'"
+    ):
+        load_params(path)
+    path.write_text("actuator: {preset: dong2022-downhole}\nfidelity: {surrogate: False}\n")
+    assert load_params(path).fidelity.surrogate is False
+
+
+def test_a_params_file_that_is_not_utf8_is_named(tmp_path: Path) -> None:
+    path = tmp_path / "latin1.yaml"
+    path.write_bytes(b"# ok\nactuator: {preset: dong\xe9}\n")
+    with pytest.raises(ParameterError, match=r"latin1\.yaml, line 2: not UTF-8 text \(byte 0xe9\)"):
+        load_params(path)
+
+
+def test_a_section_given_twice_is_refused_naming_file_key_and_line(tmp_path: Path) -> None:
+    """The second noise section silently replaced the first."""
+    path = tmp_path / "twice.yaml"
+    path.write_text(
+        "actuator: {preset: dong2022-downhole}\n"
+        "noise: {current_std_a: 0.05}\n"
+        "noise: {current_std_a: 99}\n"
+    )
+    with pytest.raises(
+        ParameterError,
+        match=r"twice\.yaml, line 3, column 1: duplicate key 'noise' \(first on line 2\)",
+    ):
+        load_params(path)

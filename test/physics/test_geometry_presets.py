@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import dataclasses
 import math
+import re
 from pathlib import Path
 
 import pytest
@@ -88,3 +89,76 @@ def test_unknown_preset_lists_the_choices() -> None:
 def test_a_missing_preset_file_is_named_as_a_file() -> None:
     with pytest.raises(ParameterError, match=r"no such preset file '/nonexistent/p.yaml'"):
         load_preset("/nonexistent/p.yaml")
+
+
+def _preset_file(tmp_path: Path, old: str, new: str) -> Path:
+    """The dong2022-downhole preset file with one line changed, under a fresh name (load_preset
+    caches by path)."""
+    bundled = Path(__file__).parents[2] / "prsm_health/physics/presets/dong2022-downhole.yaml"
+    text = bundled.read_text()
+    assert old in text
+    path = tmp_path / f"{new.split(':')[0].strip()}.yaml"
+    path.write_text(text.replace(old, new))
+    return path
+
+
+@pytest.mark.parametrize(
+    ("old", "new", "message"),
+    [
+        # A ZeroDivisionError mid-replay: the load tables and the filter scale by this load.
+        (
+            "largest_axial_load_n: 55000.0",
+            "largest_axial_load_n: 1.0e-300",
+            r"largest_axial_load_n: must be at least 1 N .*got 1e-300",
+        ),
+        # An OverflowError mid-replay: the damage rate divides by N_0.
+        (
+            "reference_cycles: 2.5e8",
+            "reference_cycles: 1.0e-300",
+            r"fatigue\.reference_cycles: must be at least 1 \(.*got 1e-300",
+        ),
+        # An OverflowError (int too large to convert to float) with a traceback.
+        (
+            "largest_axial_load_n: 55000.0",
+            f"largest_axial_load_n: {10**400}",
+            r"largest_axial_load_n: must be a finite number, got an integer of about 401 digits",
+        ),
+        ("largest_speed_rpm: 700.0", "largest_speed_rpm: .inf", r"largest_speed_rpm: must be a"),
+        ("largest_speed_rpm: 700.0", "largest_speed_rpm: true", r"largest_speed_rpm: must be a"),
+        # true counted as one roller (bool is an int).
+        (
+            "n_rollers: 10",
+            "n_rollers: true",
+            r"geometry\.n_rollers: must be an integer in \[1, 100\]",
+        ),
+        # An OverflowError in the roller-overlap check.
+        ("n_rollers: 10", f"n_rollers: {10**400}", r"geometry\.n_rollers: must be an integer"),
+        # An OverflowError in the lead (starts times pitch), later.
+        ("screw_starts: 5", f"screw_starts: {10**400}", r"geometry\.screw_starts: must be an"),
+        (
+            "n_threads: 24",
+            "n_threads: 100000",
+            r"geometry\.n_threads: must be an integer in \[1, 1",
+        ),
+        ("geometry:\n", "geometry: 3\nignored:\n", r"geometry: must be a mapping, got int"),
+    ],
+)
+def test_absurd_preset_values_are_refused_naming_file_and_key(
+    tmp_path: Path, old: str, new: str, message: str
+) -> None:
+    path = _preset_file(tmp_path, old, new)
+    with pytest.raises(ParameterError, match=rf"^{re.escape(str(path))}: {message}"):
+        load_preset_file(path)
+
+
+def test_the_preset_bounds_admit_their_limits(tmp_path: Path) -> None:
+    path = _preset_file(tmp_path, "largest_axial_load_n: 55000.0", "largest_axial_load_n: 1")
+    assert load_preset_file(path).largest_axial_load_n == 1.0
+    path = _preset_file(tmp_path, "reference_cycles: 2.5e8", "reference_cycles: 1")
+    assert load_preset_file(path).fatigue.reference_cycles == 1.0
+
+
+def test_misalignment_refuses_what_is_no_finite_number() -> None:
+    for value in (None, True, "0.001", 10**400, math.inf):
+        with pytest.raises(ParameterError, match=r"^misalignment\.tilt_x_rad: must be a"):
+            Misalignment(tilt_x_rad=value)  # type: ignore[arg-type]

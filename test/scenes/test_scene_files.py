@@ -113,6 +113,8 @@ def with_changes(**changes: object) -> dict[str, object]:
         (with_changes(sensor_faults={"glitches": []}), "sensor_faults.glitches"),
         (with_changes(speed_loop={"bandwidth_hz": 0.0}), "speed_loop.bandwidth_hz"),
         (with_changes(joint_states="yes"), "joint_states"),
+        # 400 digits: YAML reads an int that float() refuses with an OverflowError.
+        (with_changes(duration_s=10**400), "duration_s"),
     ],
 )
 def test_bad_scene_files_name_the_file_and_the_field(
