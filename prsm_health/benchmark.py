@@ -37,7 +37,7 @@ import os
 import platform
 import time
 from collections.abc import Callable, Iterable, Iterator, Sequence
-from dataclasses import dataclass, field, fields
+from dataclasses import dataclass, field
 from importlib import resources
 from pathlib import Path
 from typing import Any
@@ -693,8 +693,7 @@ def scored(states: list[HealthState], truth: TruthSamples, params: EstimatorPara
 
 def truth_until(truth: TruthSamples, end_s: float) -> TruthSamples:
     """The truth samples stamped at or before ``end_s``."""
-    keep = truth.stamp_s <= end_s
-    return TruthSamples(*(getattr(truth, f.name)[keep] for f in fields(TruthSamples)))
+    return truth[truth.stamp_s <= end_s]
 
 
 def onset_category(truth: TruthSamples, onset_s: float, moving_speed_rad_s: float) -> str:

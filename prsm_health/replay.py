@@ -39,7 +39,7 @@ from prsm_health.bags import (
     write_motor_states,
 )
 from prsm_health.bags.stamps import seconds_to_stamps
-from prsm_health.bags.topics import DIAGNOSTICS_TOPIC, HEALTH_TOPIC
+from prsm_health.bags.topics import DIAGNOSTICS_TOPIC, HEALTH_TOPIC, TRUTH_TOPIC
 from prsm_health.bags.typestore import typestore
 from prsm_health.estimation.estimate import HealthState
 from prsm_health.estimation.estimator import HealthEstimator
@@ -153,13 +153,22 @@ def replay(
 
 
 def _truth(bag: Path, damage: list[BagError]) -> TruthSamples | None:
-    """The bag's truth, or None; a damaged truth topic gives what was read before it."""
+    """The bag's truth, or None; a damaged truth topic gives what was read before it, and so
+    does a truth sample with a non-finite value (the bag is damaged there as well)."""
     try:
         truth, error = read_truth(bag, partial_ok=True)
     except BagError:
         return None
     if error is not None and not damage:
         damage.append(error)
+    if truth is None:
+        return None
+    finite = truth.finite()
+    if not finite.all():
+        first = int(np.argmin(finite))
+        if not damage:
+            damage.append(BagError(bag, f"{TRUTH_TOPIC}: message {first} holds a non-finite value"))
+        truth = truth[:first]  # scored up to it
     return truth
 
 

@@ -136,6 +136,19 @@ class TruthSamples:
     def __len__(self) -> int:
         return len(self.stamp_s)
 
+    def __getitem__(self, index: slice | BoolArray) -> TruthSamples:
+        """The samples of a slice or a mask."""
+        return TruthSamples(*(getattr(self, f.name)[index] for f in fields(self)))
+
+    def finite(self) -> BoolArray:
+        """Per sample: every real-valued field is finite (a NaN load cannot be scored)."""
+        ok = np.ones(len(self), dtype=bool)
+        for f in fields(self):
+            values = getattr(self, f.name)
+            if values.dtype.kind == "f":
+                ok &= np.isfinite(values)
+        return ok
+
     @property
     def jammed_rollers(self) -> IntArray:
         """Number of jammed rollers per sample."""

@@ -268,6 +268,29 @@ def test_cli_reports_damage_first_when_nothing_before_it_was_accepted(
     assert "DAMAGED" in out and "no sample of" in out
 
 
+def test_a_truth_with_a_non_finite_value_is_scored_up_to_it(
+    bag: Path, tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    """A NaN load in the truth: the bag is damaged there, the report and the metrics cover the
+    truth before it (the report failed with matplotlib's 'Axis limits cannot be NaN or Inf')."""
+    truth = read_truth(bag)
+    load = truth.axial_load_n.copy()
+    load[500] = math.nan
+    broken = tmp_path / "broken-truth"
+    with BagWriter(broken) as writer:
+        write_motor_states(writer, read_motor_samples(bag, InputTopics()))
+        write_truth(writer, dataclasses.replace(truth, axial_load_n=load))
+    result = replay(broken, params())
+    assert result.damage is not None and "message 500 holds a non-finite value" in str(
+        result.damage
+    )
+    assert result.truth is not None and len(result.truth) == 500
+    assert result.metrics is not None and math.isfinite(result.metrics.load_rmse_n)
+    report = tmp_path / "report"
+    assert main(["replay", str(broken), "--scene", "sudden-jam", "--report", str(report)]) == 1
+    assert "DAMAGED" in capsys.readouterr().out and (report / "load.png").is_file()
+
+
 def test_metrics_that_cannot_be_computed_are_null_in_the_json(
     tmp_path: Path, capsys: pytest.CaptureFixture[str]
 ) -> None:
