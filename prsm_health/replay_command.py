@@ -69,7 +69,10 @@ def _params(args: argparse.Namespace) -> tuple[EstimatorParams, str]:
     scene = args.scene
     if scene is None and args.params is None:
         scene = bundled_scene_of(args.bag)
-    params = params_from_mapping(data)
+    try:
+        params = params_from_mapping(data)
+    except ValueError as exc:  # a bad value: say which file holds it
+        raise ValueError(f"--params: {path}: {exc}") from exc
     if scene is None:
         return params, str(path)
     actuator = load_scene(scene).actuator

@@ -179,7 +179,7 @@ def test_cli_refuses_a_missing_bag_and_bad_params_in_one_line(
     bad.write_text("actuator: {preset: dong2022-downhole}\nfilter: {block_duration_s: -1}\n")
     assert main(["replay", str(tmp_path / "nope"), "--params", str(bad)]) == 2
     err = capsys.readouterr().err
-    assert err.count("\n") == 1 and "filter.block_duration_s" in err
+    assert err.count("\n") == 1 and f"--params: {bad}: filter.block_duration_s" in err
 
 
 def test_a_bag_named_after_a_bundled_scene_takes_its_actuator(

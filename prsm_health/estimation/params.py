@@ -395,11 +395,13 @@ def params_from_mapping(data: dict[str, Any]) -> EstimatorParams:
 
 
 def load_params(path: Path) -> EstimatorParams:
-    """Load a params YAML file; errors name the file or the bad key."""
+    """Load a params YAML file; errors name the file (and the bad key)."""
     try:
         return params_from_mapping(load_yaml_mapping(path))
     except YamlError as exc:
         raise ParameterError("params", str(exc)) from exc
+    except ParameterError as exc:
+        raise exc.in_file(path) from exc
 
 
 #: The bundled parameters of the downhole actuator, relative to the package's share directory

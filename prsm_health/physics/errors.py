@@ -19,6 +19,11 @@ class ParameterError(PhysicsError, ValueError):
     def __init__(self, field: str, message: str) -> None:
         super().__init__(f"{field}: {message}")
         self.field = field
+        self.message = message
+
+    def in_file(self, path: object) -> ParameterError:
+        """The same error, naming the data file that holds the parameter."""
+        return ParameterError(f"{path}: {self.field}", self.message)
 
 
 class DomainError(PhysicsError, ValueError):

@@ -100,8 +100,7 @@ def load_preset_file(path: Path) -> Preset:
     except YamlError as exc:
         raise ParameterError("preset", str(exc)) from exc
     except ParameterError as exc:  # a bad value: say which file holds it
-        message = str(exc).removeprefix(f"{exc.field}: ")
-        raise ParameterError(f"{path}: {exc.field}", message) from exc
+        raise exc.in_file(path) from exc
 
 
 @cache

@@ -85,8 +85,7 @@ def prefixed(exc: ParameterError, prefix: str, separator: str = ".") -> Paramete
     """The same error with ``prefix`` before its field (unless the field already has it)."""
     if exc.field == prefix or exc.field.startswith(f"{prefix}{separator}"):
         return exc
-    message = str(exc).removeprefix(f"{exc.field}: ")
-    return ParameterError(f"{prefix}{separator}{exc.field}", message)
+    return ParameterError(f"{prefix}{separator}{exc.field}", exc.message)
 
 
 def section(cls: type[T], data: object, name: str, **fixed: Any) -> T:

@@ -126,6 +126,9 @@ def test_load_params_reads_yaml_and_names_an_unreadable_file(tmp_path: Path) -> 
     assert load_params(path).filter.block_duration_s == pytest.approx(0.02)
     with pytest.raises(ParameterError, match=r"missing\.yaml"):
         load_params(tmp_path / "missing.yaml")
+    path.write_text("actuator: {preset: li2020-jamming}\nfilter: {block_duration_s: -1}\n")
+    with pytest.raises(ParameterError, match=rf"^{path}: filter\.block_duration_s: must be"):
+        load_params(path)
 
 
 def _documented_value(text: str) -> object:
