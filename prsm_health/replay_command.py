@@ -167,7 +167,12 @@ def run_replay(args: argparse.Namespace) -> int:
             print(f"  --metrics-json: not written, {args.bag} has no ground truth to score")
         else:
             text = json.dumps(result.metrics.to_dict(), indent=2, allow_nan=False)
-            _write("--metrics-json", args.metrics_json, text + "\n")
+            try:
+                args.metrics_json.write_text(text + "\n")
+            except OSError as exc:
+                raise ValueError(
+                    f"--metrics-json: cannot write {args.metrics_json}: {exc}"
+                ) from exc
     if args.report is not None:
         from prsm_health.report import write_report  # matplotlib: only when a report is asked
 
@@ -178,13 +183,6 @@ def run_replay(args: argparse.Namespace) -> int:
         except OSError as exc:
             raise ValueError(f"--report: cannot write into {args.report}: {exc}") from exc
     return 1 if result.damage is not None else 0
-
-
-def _write(option: str, path: Path, text: str) -> None:
-    try:
-        path.write_text(text)
-    except OSError as exc:
-        raise ValueError(f"{option}: cannot write {path}: {exc}") from exc
 
 
 def _rejected_why(bag: Path, topics: InputTopics, result: ReplayResult) -> str:
