@@ -105,6 +105,8 @@ def load_yaml_mapping(path: Path) -> dict[str, Any]:
         raise YamlError(_parse_error(path, exc)) from exc
     except ValueError as exc:  # e.g. an integer beyond Python's 4300-digit conversion limit
         raise YamlError(f"{path}: {exc}") from exc
+    except RecursionError as exc:  # the parser recurses per level of nesting
+        raise YamlError(f"{path}: nested too deeply") from exc
     if not isinstance(data, dict):
         raise YamlError(f"{path} does not hold a mapping")
     return data

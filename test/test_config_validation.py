@@ -132,3 +132,12 @@ def test_motor_samples_name_a_bad_column(field: str, value: object, message: str
     """The estimator failed deep inside on these, naming neither the field nor the problem."""
     with pytest.raises(ValueError, match=message):
         MotorSamples(**(_columns() | {field: value}))  # type: ignore[arg-type]
+
+
+def test_a_file_nested_too_deeply_is_one_line_naming_it(tmp_path: Path) -> None:
+    """The parser recurses per level: a RecursionError escaped (the node logged only that
+    configure failed)."""
+    path = tmp_path / "deep.yaml"
+    path.write_text("a: " + "[" * 5000 + "]" * 5000 + "\n", encoding="utf-8")
+    with pytest.raises(YamlError, match=rf"^{re.escape(str(path))}: nested too deeply$"):
+        load_yaml_mapping(path)

@@ -47,6 +47,9 @@ SNAPSHOT_FORMAT = 2
 #: filter reaches comes near it (predictions are capped at one second); a larger one is a
 #: damaged file, and it would overflow once symmetrised.
 SNAPSHOT_LARGEST_VALUE = 1e100
+#: A restored sample counter must stay below this: the messages carry the counts as uint64
+#: (accepted plus rejected, and the counts that follow). 2^62 samples at 1 kHz are 146 My.
+SNAPSHOT_LARGEST_COUNT = 2**62
 
 
 class SnapshotError(ValueError):
@@ -189,12 +192,17 @@ class HealthEstimator:
         if not any(math.isfinite(state[4]) for state in states):
             raise SnapshotError("no hypothesis with a probability above zero")
         # Losses, damages, their error terms and the rate only ever grow from zero.
-        if not all(0.0 <= v < math.inf for v in degradation.to_dict().values()):
-            raise SnapshotError(f"degradation values must be finite and >= 0: {degradation}")
-        if len(rejected) != len(self.counters.rejected) or accepted < 0 or min(rejected) < 0:
+        if not all(0.0 <= v < SNAPSHOT_LARGEST_VALUE for v in degradation.to_dict().values()):
+            raise SnapshotError(
+                f"degradation values must be >= 0 and < {SNAPSHOT_LARGEST_VALUE:g}: {degradation}"
+            )
+        counts = [accepted, *rejected]
+        if len(rejected) != len(self.counters.rejected) or not all(
+            0 <= n < SNAPSHOT_LARGEST_COUNT for n in counts
+        ):
             raise SnapshotError(
                 f"sample counters: {len(self.counters.rejected)} rejection reasons expected, "
-                f"got {len(rejected)}, or a negative count"
+                f"each count in [0, 2^62), got {len(rejected)} reasons, counts {counts}"
             )
         self._bank.restore(states)
         self._degradation.state = degradation

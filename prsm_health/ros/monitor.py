@@ -6,6 +6,18 @@ status); on a terminal each block replaces the previous one. JSON mode prints on
 message (``{"topic": ..., ...}``). Ends after ``count`` printed records (blocks or JSON lines)
 or after ``timeout_s``. A monitor started after the node sees the diagnostics at once (they are
 published periodically) but an estimate only when the node makes a new one.
+
+``/diagnostics`` is shared by every node, and a prsm_health status says which node it is from
+only by its ``hardware_id`` (every node names its statuses ``prsm_health: ...``; the message
+does not carry its publisher here): the monitor shows the statuses whose ``hardware_id`` is
+the node's. It asks the node for its ``hardware_id`` parameter through its parameter service
+until it answers, unless ``MonitorOptions.hardware_id`` names it (once: the node applies it at
+configure and refuses a change while configured); statuses that come before the answer are
+kept, the latest of each hardware id, and the node's shown once it is known.
+
+Messages from other publishers (``ros2 topic pub``, other tools) are shown as they are, never
+refused: a level that is none of the four is ``level 7 (unknown)``, an estimate without the
+probability of its jam count says so.
 """
 
 from __future__ import annotations
@@ -20,6 +32,8 @@ from typing import Any, TextIO
 import rclpy
 from diagnostic_msgs.msg import DiagnosticArray
 from prsm_health_msgs.msg import HealthEstimate
+from rcl_interfaces.msg import ParameterType
+from rcl_interfaces.srv import GetParameters
 from rclpy.exceptions import InvalidTopicNameException
 from rclpy.executors import SingleThreadedExecutor
 from rclpy.qos import QoSProfile, QoSReliabilityPolicy
@@ -34,18 +48,23 @@ CLEAR = "\x1b[H\x1b[J"
 NO_ESTIMATE = (
     "no estimate received since the monitor started (the node publishes one per new estimate)"
 )
+#: How often the node is asked for its hardware_id until it answers [s]: a request sent as its
+#: service appears may be lost.
+ASK_PERIOD_S = 1.0
 
 
 @dataclass(frozen=True, kw_only=True)
 class MonitorOptions:
     """node: the node's full name (its health topic is ``<node>/health``). json: JSON lines.
     count: stop after this many records (0: no limit). timeout_s: stop after this long
-    (0: no limit)."""
+    (0: no limit). hardware_id: show the statuses of this hardware id (None: the node's, asked
+    from it; see the module docstring)."""
 
     node: str = "/prsm_health"
     json: bool = False
     count: int = 0
     timeout_s: float = 0.0
+    hardware_id: str | None = None
 
     def __post_init__(self) -> None:
         """Refuse a node name that cannot name a topic, as a usage error (ValueError), before
@@ -82,14 +101,24 @@ def health_record(msg: Any) -> dict[str, Any]:
     return record
 
 
+def level_name(level: bytes) -> str:
+    """A DiagnosticStatus level (a one-byte ``bytes``) by name, or ``level 7 (unknown)`` for
+    one that is none of the four (another publisher's: shown, not refused)."""
+    try:
+        return Level(level[0]).name
+    except ValueError:
+        return f"level {level[0]} (unknown)"
+
+
 def diagnostics_record(msg: Any) -> dict[str, Any]:
-    """The prsm_health statuses of a DiagnosticArray as a JSON-able dict."""
+    """The prsm_health statuses of a DiagnosticArray (of every hardware id) as a JSON-able
+    dict."""
     return {
         "stamp": stamp_seconds(msg.header.stamp),
         "status": [
             {
                 "name": s.name,
-                "level": Level(s.level[0]).name,
+                "level": level_name(s.level),
                 "message": s.message,
                 "hardware_id": s.hardware_id,
                 "values": {kv.key: kv.value for kv in s.values},
@@ -100,14 +129,28 @@ def diagnostics_record(msg: Any) -> dict[str, Any]:
     }
 
 
-def health_line(record: dict[str, Any]) -> str:
-    """One line of the latest estimate."""
+def statuses_of(record: dict[str, Any], hardware_id: str) -> dict[str, Any]:
+    """A :func:`diagnostics_record` with only the statuses of ``hardware_id``."""
+    return {**record, "status": [s for s in record["status"] if s["hardware_id"] == hardware_id]}
+
+
+def jam_probability(record: dict[str, Any]) -> str:
+    """The probability of the most likely jam count, or what is missing (an estimate from
+    another publisher, e.g. a default message, may have fewer probabilities)."""
     probabilities = record["jammed_rollers_probability"]
     jammed = record["jammed_rollers_most_likely"]
+    if jammed < len(probabilities):
+        return f"p {probabilities[jammed]:.2f}"
+    return f"no probability of {jammed}" if probabilities else "no probabilities"
+
+
+def health_line(record: dict[str, Any]) -> str:
+    """One line of the latest estimate."""
     return (
         f"t {record['stamp']:.2f} s  load {record['axial_load_n'] / 1e3:.2f}"
-        f" +- {record['axial_load_std_n'] / 1e3:.2f} kN  jammed {jammed}"
-        f" (p {probabilities[jammed]:.2f})  loss {record['precision_loss_um']:.4g} um"
+        f" +- {record['axial_load_std_n'] / 1e3:.2f} kN"
+        f"  jammed {record['jammed_rollers_most_likely']} ({jam_probability(record)})"
+        f"  loss {record['precision_loss_um']:.4g} um"
         f" ({record['precision_loss_rate_um_per_h']:.3g} um/h)"
         f"  fatigue {record['fatigue_damage']:.3g}"
     )
@@ -133,6 +176,13 @@ class Monitor:
         self.records = 0
         self.health_received = 0
         self.timed_out = False
+        #: Whose statuses are shown (None until the node has told it).
+        self.hardware_id = options.hardware_id
+        #: Until then: the latest statuses of each hardware id.
+        self._unclaimed: dict[str, dict[str, Any]] = {}
+        #: Why the node's answer gave no hardware id ("" if it did not answer).
+        self._no_hardware_id = ""
+        self._next_ask_s = 0.0
         self._live = out.isatty() and not options.json
         self._node = rclpy.create_node("prsm_health_monitor")
         reliable = QoSProfile(depth=50, reliability=QoSReliabilityPolicy.RELIABLE)
@@ -141,6 +191,9 @@ class Monitor:
         )
         self._node.create_subscription(
             DiagnosticArray, "/diagnostics", self._on_diagnostics, reliable
+        )
+        self._parameters = self._node.create_client(
+            GetParameters, options.full_name + "/get_parameters"
         )
         self._executor = SingleThreadedExecutor()
         self._executor.add_node(self._node)
@@ -158,6 +211,14 @@ class Monitor:
 
     def _on_diagnostics(self, msg: Any) -> None:
         record = diagnostics_record(msg)
+        if self.hardware_id is not None:
+            self._show(statuses_of(record, self.hardware_id))
+            return
+        for hardware_id in {s["hardware_id"] for s in record["status"]}:
+            self._unclaimed[hardware_id] = statuses_of(record, hardware_id)
+
+    def _show(self, record: dict[str, Any]) -> None:
+        """Print the node's statuses (if there are any) as the latest diagnostics."""
         if not record["status"]:
             return
         self.latest_diagnostics = record
@@ -166,8 +227,35 @@ class Monitor:
         else:
             self._emit(table(self.latest_health, record))
 
+    def _ask_hardware_id(self) -> None:
+        """Ask the node for its hardware_id parameter, once its parameter service is up and
+        again every :data:`ASK_PERIOD_S` until it has told it."""
+        now = time.monotonic()
+        if self.hardware_id is not None or now < self._next_ask_s:
+            return
+        if self._parameters.service_is_ready():
+            self._next_ask_s = now + ASK_PERIOD_S
+            request = GetParameters.Request(names=["hardware_id"])
+            self._parameters.call_async(request).add_done_callback(self._on_hardware_id)
+
+    def _on_hardware_id(self, future: Any) -> None:
+        """The node's answer: show its statuses from now on, and those that came before."""
+        response = future.result()
+        if self.hardware_id is not None or response is None:
+            return
+        values = response.values
+        if not values or values[0].type != ParameterType.PARAMETER_STRING:
+            self._no_hardware_id = f"{self.options.full_name} has no hardware_id parameter"
+            return
+        self.hardware_id = str(values[0].string_value)
+        before = self._unclaimed.pop(self.hardware_id, None)
+        self._unclaimed.clear()
+        if before is not None:
+            self._show(before)
+
     def spin_once(self, timeout_s: float = 0.05) -> None:
         """Handle what has arrived, waiting at most ``timeout_s`` for something."""
+        self._ask_hardware_id()
         self._executor.spin_once(timeout_sec=timeout_s)
 
     def done(self) -> bool:
@@ -186,16 +274,29 @@ class Monitor:
         return self.done() if self.options.count else self.records > 0
 
     def shortfall(self) -> str:
-        """Why :meth:`run` returned False, for the user: first of all whether anything came."""
+        """Why :meth:`run` returned False, for the user: first of all whether anything came,
+        then whether the node's statuses could be told from the others'."""
         within = f" within {self.options.timeout_s:g} s" if self.timed_out else ""
+        unknown = (
+            self._no_hardware_id or f"{self.options.full_name} did not tell its hardware_id"
+        ) + " (--hardware-id ID shows the statuses of ID)"
         if not self.health_received and self.latest_diagnostics is None:
+            if self._unclaimed and self.hardware_id is None:
+                return f"prsm_health statuses on /diagnostics{within}, but {unknown}"
             return (
                 f"nothing received on {self.options.health_topic} or /diagnostics{within}: is"
                 " the node running, under this name, with the same ROS_DOMAIN_ID?"
             )
-        if self.options.count:
-            return f"{self.records} of {self.options.count} records printed{within}"
-        return f"estimates received{within}, but no prsm_health statuses on /diagnostics"
+        count = self.options.count
+        text = f"{self.records} of {count} records printed" if count else "estimates received"
+        if self.hardware_id is None:
+            return f"{text}{within}, but {unknown}"
+        if count:
+            return f"{text}{within}"
+        return (
+            f"{text}{within}, but no prsm_health statuses of hardware_id {self.hardware_id}"
+            " on /diagnostics"
+        )
 
     def close(self) -> None:
         """Destroy the executor and the node."""

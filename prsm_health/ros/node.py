@@ -28,6 +28,7 @@ import math
 import sys
 from collections import Counter
 from collections.abc import Sequence
+from difflib import get_close_matches
 from typing import Any
 
 import numpy as np
@@ -44,6 +45,7 @@ from rclpy.clock import Clock
 from rclpy.clock_type import ClockType
 from rclpy.exceptions import InvalidParameterTypeException, InvalidParameterValueException
 from rclpy.executors import SingleThreadedExecutor
+from rclpy.impl.implementation_singleton import rclpy_implementation as _rclpy
 from rclpy.lifecycle import LifecycleNode, LifecycleState, TransitionCallbackReturn
 from rclpy.parameter import Parameter
 from rclpy.qos import QoSHistoryPolicy, QoSProfile, QoSReliabilityPolicy
@@ -133,7 +135,8 @@ class HealthNode(LifecycleNode):
 
     def __init__(self, **kwargs: Any) -> None:
         super().__init__(NODE_NAME, **kwargs)
-        self._declare_errors = self._declare_parameters()
+        self._guard_transitions()
+        self._declare_errors = self._declare_parameters() | self._unknown_overrides()
         self.add_on_set_parameters_callback(self._on_set_parameters)
         self._steady = Clock(clock_type=ClockType.STEADY_TIME)
         self._config: NodeConfig | None = None
@@ -163,6 +166,40 @@ class HealthNode(LifecycleNode):
                 )
         return errors
 
+    def _unknown_overrides(self) -> dict[str, str]:
+        """Values given at start (``-p``, a params file) for parameters nobody declared: a
+        misspelt name would otherwise leave the default in place without a word. (rclpy keeps
+        the overrides only in Node._parameter_overrides.)"""
+        unknown = [name for name in self._parameter_overrides if not self.has_parameter(name)]
+        return {
+            name: "unknown parameter"
+            + (f" (did you mean {close[0]}?)" if (close := get_close_matches(name, SPECS)) else "")
+            for name in unknown
+        }
+
+    def _guard_transitions(self) -> None:
+        """Answer a lifecycle transition id the current state does not have with success=False.
+
+        rclpy 7.1 (Jazzy) raises RCLError out of the executor for it, which ends the node and
+        loses its unsaved state (ros2/rclpy#1209; fixed upstream by ros2/rclpy#1319, not in
+        this release). An unknown label is already answered with success=False."""
+        service = self._service_change_state
+        change_state = service.callback
+
+        def guarded(request: Any, response: Any) -> Any:
+            transition = request.transition
+            available = {t[0] for t in self._state_machine.available_transitions}
+            if not transition.label and transition.id not in available:
+                self.get_logger().warning(
+                    f"lifecycle transition {transition.id} refused: not available in state "
+                    f"{self._state_machine.current_state[1]}"
+                )
+                response.success = False
+                return response
+            return change_state(request, response)
+
+        service.callback = guarded
+
     def _on_set_parameters(self, parameters: list[Parameter]) -> SetParametersResult:
         ours = [p for p in parameters if p.name in SPECS]
         for parameter in ours:
@@ -184,6 +221,11 @@ class HealthNode(LifecycleNode):
 
     def _parameter_values(self) -> dict[str, Any]:
         return {spec.name: self.get_parameter(spec.name).value for spec in PARAMETERS}
+
+    @property
+    def save_failed(self) -> bool:
+        """The last attempt to save the state failed (the exit code says so at the end)."""
+        return self._persistence.save_error is not None
 
     # --- lifecycle ----------------------------------------------------------------------
     def autostart(self) -> None:
@@ -262,9 +304,13 @@ class HealthNode(LifecycleNode):
             if config.input_qos == "reliable"
             else QoSReliabilityPolicy.BEST_EFFORT
         )
+        # Reliable input keeps every sample (KEEP_ALL: a full queue holds the publisher back;
+        # KEEP_LAST would overwrite samples that DDS has already acknowledged).
         qos = QoSProfile(
             depth=config.input_queue_depth,
-            history=QoSHistoryPolicy.KEEP_LAST,
+            history=QoSHistoryPolicy.KEEP_ALL
+            if config.input_qos == "reliable"
+            else QoSHistoryPolicy.KEEP_LAST,
             reliability=reliability,
         )
         if config.input_type == "motor_state":
@@ -508,7 +554,11 @@ class HealthNode(LifecycleNode):
 def main(argv: Sequence[str] | None = None) -> int:
     """Run the node until SIGINT/SIGTERM; then shut it down with the state saved."""
     args = list(sys.argv if argv is None else argv)
-    extra = remove_ros_args(args)[1:]
+    try:
+        extra = remove_ros_args(args)[1:]
+    except _rclpy.RCLError as exc:  # malformed --ros-args (rcl's message spans several lines)
+        print(f"prsm-health-node: invalid --ros-args: {str(exc).splitlines()[0]}", file=sys.stderr)
+        return 2
     if extra:
         print(
             f"prsm-health-node: unexpected arguments {extra}; parameters go after --ros-args,"
@@ -529,7 +579,7 @@ def main(argv: Sequence[str] | None = None) -> int:
         finally:
             executor.shutdown()
             node.destroy_node()
-    return 0
+    return 1 if node.save_failed else 0
 
 
 if __name__ == "__main__":

@@ -200,6 +200,18 @@ def _estimator_params(params_file: Path, preset: str) -> EstimatorParams:
     return params_from_mapping(data)
 
 
+def _state_file_problem(path: Path) -> str | None:
+    """Why ``path`` cannot be the state file, or None: a directory there would be moved aside
+    as an unreadable state (with whatever it holds), a file where its folder should be makes
+    every save fail."""
+    if path.is_dir():
+        return f"{path} is a directory; name a file (e.g. {path / 'state.json'})"
+    folder = next((p for p in path.parents if p.exists()), None)
+    if folder is not None and not folder.is_dir():
+        return f"{folder} is not a directory, so {path} cannot be written"
+    return None
+
+
 def node_config(values: Mapping[str, Any], errors: Mapping[str, str] | None = None) -> NodeConfig:
     """Validate the parameter values (name -> value); ``errors``: problems already known
     (e.g. a value ROS refused at declaration). Raises ConfigError naming every bad one."""
@@ -237,7 +249,9 @@ def node_config(values: Mapping[str, Any], errors: Mapping[str, str] | None = No
     )
     state_file = (
         Path(values["state_file"]) if values["state_file"] else default_state_file(hardware_id)
-    )
+    ).expanduser()
+    if problem := _state_file_problem(state_file):
+        raise ConfigError({"state_file": problem})
     return NodeConfig(
         estimator=estimator,
         params_file=params_file,
@@ -251,6 +265,6 @@ def node_config(values: Mapping[str, Any], errors: Mapping[str, str] | None = No
         batch_period_s=float(values["batch_period_s"]),
         health_rate_hz=float(values["health_rate_hz"]),
         diagnostics_rate_hz=float(values["diagnostics_rate_hz"]),
-        state_file=state_file.expanduser(),
+        state_file=state_file,
         save_period_s=float(values["save_period_s"]),
     )

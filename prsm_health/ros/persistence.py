@@ -96,6 +96,8 @@ class StateStore:
             estimator.restore(snapshot)
         except ValueError as exc:  # JSONDecodeError and SnapshotError are ValueErrors
             return self._keep_aside(f"unusable state file {self.path}: {exc}")
+        except RecursionError:  # json.loads of lists nested thousands deep
+            return self._keep_aside(f"unusable state file {self.path}: nested too deeply")
         return RestoreOutcome(restored=True)
 
     def _snapshot(self, document: Any) -> dict[str, Any]:

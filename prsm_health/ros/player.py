@@ -20,6 +20,7 @@ waited for.
 
 from __future__ import annotations
 
+import math
 import threading
 import time
 from collections import Counter
@@ -47,6 +48,17 @@ SETTLE_S = 0.3
 #: message at its heartbeat (every 3 s), later on a starved machine.
 ACK_TIMEOUT_S = 10.0
 NS_PER_S = 1e9
+#: The speed factors played [-]: at the slowest a second of bag lasts 1000 s (17 min), slower
+#: is no playback anyone watches (and a far slower one overflowed the wait); at the fastest a
+#: 1 kHz bag's messages are due 1 ns apart, already faster than they can be published.
+RATE_RANGE = (1e-3, 1e6)
+#: The /clock rates [Hz of bag time]: at least one per 100 s, the period of the node's slowest
+#: timer (diagnostics_rate_hz 0.01), which a slower clock would leave behind; at most one per
+#: nanosecond, the resolution of log time (and the period, 1e9 / rate, stays an integer).
+CLOCK_RATE_RANGE = (1e-2, 1e9)
+#: The longest single wait for a message [s]: threading's waits refuse more than
+#: threading.TIMEOUT_MAX (292 years), which a bag's log times at a slow rate can exceed.
+LONGEST_WAIT_S = 3600.0
 
 
 class PlayError(RuntimeError):
@@ -61,9 +73,10 @@ class PlayInputError(ValueError):
 
 @dataclass(frozen=True, kw_only=True)
 class PlayOptions:
-    """rate: speed factor of the log time. clock: publish /clock at clock_rate_hz of bag
-    time. topics: only these (all if empty). loop: start again at the end until stopped.
-    wait_for_subscribers_s: see the module docstring (0: do not wait)."""
+    """rate: speed factor of the log time (within :data:`RATE_RANGE`). clock: publish /clock
+    at clock_rate_hz of bag time (within :data:`CLOCK_RATE_RANGE`). topics: only these (all if
+    empty). loop: start again at the end until stopped. wait_for_subscribers_s: see the module
+    docstring (0: do not wait)."""
 
     rate: float = 1.0
     clock: bool = False
@@ -73,12 +86,20 @@ class PlayOptions:
     wait_for_subscribers_s: float = 0.0
 
     def __post_init__(self) -> None:
-        if not (self.rate > 0.0 and self.clock_rate_hz > 0.0):
-            raise PlayInputError(
-                f"rate and clock rate must be > 0, got {self.rate}, {self.clock_rate_hz}"
-            )
-        if self.wait_for_subscribers_s < 0.0:
-            raise PlayInputError("the wait for subscribers must be >= 0 s")
+        """Refuse, as a usage error, a rate or clock rate outside :data:`RATE_RANGE` and
+        :data:`CLOCK_RATE_RANGE` (named by the command line's options) and a negative or
+        non-finite wait."""
+        _require_within("--rate", self.rate, RATE_RANGE)
+        _require_within("--clock-rate", self.clock_rate_hz, CLOCK_RATE_RANGE)
+        if not 0.0 <= self.wait_for_subscribers_s < math.inf:
+            raise PlayInputError("the wait for subscribers must be a finite number >= 0 s")
+
+
+def _require_within(option: str, value: float, bounds: tuple[float, float]) -> None:
+    """PlayInputError unless ``bounds[0] <= value <= bounds[1]`` (NaN is outside)."""
+    low, high = bounds
+    if not low <= value <= high:
+        raise PlayInputError(f"{option} must be within {low:g} .. {high:g}, got {value:g}")
 
 
 @dataclass
@@ -217,11 +238,12 @@ def _one_pass(
             start, first_ns = time.monotonic(), log_time_ns
         target = start + (log_time_ns - first_ns) / NS_PER_S / rate
         delay = target - time.monotonic()
-        if delay > 0.0:
-            if stop.wait(delay):
-                return
-        else:
+        if delay <= 0.0:
             report.max_late_s = max(report.max_late_s, -delay)
+        while delay > 0.0:
+            if stop.wait(min(delay, LONGEST_WAIT_S)):
+                return
+            delay = target - time.monotonic()
         if clock is not None:
             clock.tick(log_time_ns)
         publishers[connection.topic].publish(bytes(raw))

@@ -62,6 +62,11 @@ def add_ros_commands(commands: argparse._SubParsersAction[Parser]) -> None:
     monitor.add_argument("--json", action="store_true", help="one JSON object per message")
     monitor.add_argument("--count", type=_count, default=0, metavar="N", help="stop after N")
     monitor.add_argument("--timeout", type=_non_negative, default=0.0, metavar="S")
+    monitor.add_argument(
+        "--hardware-id",
+        metavar="ID",
+        help="show the statuses of ID (default: the node's hardware_id, asked from the node)",
+    )
     monitor.set_defaults(handler=_run_monitor)
 
     demo = commands.add_parser("demo", help="node + bag + monitor on loopback, then a summary")
@@ -113,7 +118,11 @@ def _run_monitor(args: argparse.Namespace) -> int:
     from prsm_health.ros.runtime import ros_session
 
     options = MonitorOptions(
-        node=args.node, json=args.json, count=args.count, timeout_s=args.timeout
+        node=args.node,
+        json=args.json,
+        count=args.count,
+        timeout_s=args.timeout,
+        hardware_id=args.hardware_id,
     )
     with ros_session() as stop:
         monitor = Monitor(options)
@@ -128,7 +137,9 @@ def _run_monitor(args: argparse.Namespace) -> int:
 
 def _run_demo(args: argparse.Namespace) -> int:
     from prsm_health.ros.demo import DemoError, run_demo
+    from prsm_health.ros.player import PlayOptions
 
+    PlayOptions(rate=args.rate)  # the demo's player's rate: refused here, as play refuses it
     try:
         return run_demo(args.bag, rate=args.rate, timeout_s=args.timeout, workdir=args.workdir)
     except DemoError as exc:

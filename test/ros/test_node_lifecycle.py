@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+import subprocess
+import sys
 from pathlib import Path
 
 import pytest
@@ -85,6 +87,11 @@ def test_inactive_node_publishes_nothing(ros: None, tmp_path: Path) -> None:
         ) as node:
             node.wait_log("autostart is false")
             assert listener.lifecycle_state() == "unconfigured"
+            # A transition the state does not have is refused; rclpy 7.1 raised out of the
+            # executor and ended the node (ros2/rclpy#1209).
+            assert not listener.transition("deactivate")
+            node.wait_log("lifecycle transition 4 refused: not available in state unconfigured")
+            assert node.alive() and listener.lifecycle_state() == "unconfigured"
             assert listener.transition("configure")
             assert listener.lifecycle_state() == "inactive"
             listener.spin(1.0)  # 20 diagnostics if it were active
@@ -116,3 +123,27 @@ def test_inactive_node_publishes_nothing(ros: None, tmp_path: Path) -> None:
             assert "Traceback" not in node.log()
     finally:
         listener.close()
+
+
+@pytest.mark.timeout(60)
+def test_a_misspelt_parameter_fails_configure_by_name(ros: None, tmp_path: Path) -> None:
+    """A value given at start for a parameter nobody declared left the default in place
+    without a word."""
+    with NodeProcess(
+        tmp_path,
+        "misspelt",
+        hardware_id="misspelt",
+        state_file=str(tmp_path / "state.json"),
+        input_topc="/left/motor_state",
+    ) as node:
+        node.wait_log("configure failed")
+        assert "input_topc: unknown parameter (did you mean input_topic?)" in node.log()
+        assert node.alive()
+
+
+def test_malformed_ros_arguments_are_one_line_and_exit_2() -> None:
+    command = [sys.executable, "-m", "prsm_health.ros.node", "--ros-args", "-p", "hardware_id"]
+    result = subprocess.run(command, capture_output=True, text=True, timeout=60, check=False)
+    assert result.returncode == 2, result.stderr
+    assert result.stderr.startswith("prsm-health-node: invalid --ros-args: ")
+    assert result.stderr.count("\n") == 1 and "Traceback" not in result.stderr

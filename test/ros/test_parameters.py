@@ -102,3 +102,15 @@ def test_docs_list_every_parameter_and_status() -> None:
         assert f"| `{spec.name}` | {ros_types[type(spec.default)]} |" in docs
     for name in (*STATUS_NAMES, PERSISTENCE):
         assert f"| `{name}` |" in docs
+
+
+def test_a_state_file_that_is_a_directory_or_under_a_file_is_refused(tmp_path: Path) -> None:
+    """A directory there was moved aside as an unreadable state file, with everything in it
+    (other actuators' states); a file where its folder should be failed with a bare
+    NotADirectoryError."""
+    with pytest.raises(ConfigError, match=rf"parameter state_file: {tmp_path} is a directory"):
+        node_config(values(state_file=str(tmp_path)))
+    a_file = tmp_path / "a-file"
+    a_file.write_text("")
+    with pytest.raises(ConfigError, match=rf"state_file: {a_file} is not a directory"):
+        node_config(values(state_file=str(a_file / "state.json")))

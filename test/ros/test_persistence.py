@@ -57,6 +57,7 @@ def test_missing_file_is_a_fresh_start(tmp_path: Path, params: EstimatorParams) 
         ("{not json", "unusable state file"),
         ('{"format": "prsm_health.state/1", "hardware_id": "left", "estimator": []}', "no est"),
         ('{"format": "other"}', "not a prsm_health.state/1"),
+        ("[" * 100_000, "nested too deeply"),  # json.loads raised RecursionError
     ],
 )
 def test_corrupt_file_is_kept_aside(
@@ -87,6 +88,34 @@ def test_malformed_estimator_state_is_kept_aside(
     outcome = store.restore(HealthEstimator(params))
     assert outcome.kept_corrupt is not None
     assert outcome.problem.startswith(f"unusable state file {store.path}: ")
+
+
+@pytest.mark.parametrize(
+    ("section", "key", "value", "problem"),
+    [
+        # A uint64 message field cannot carry it: every HealthEstimate publish failed.
+        (None, "samples_accepted", 2**64, "sample counters"),
+        # Published as 0 um ("OK, 0 um of the budget"): 1e303 m is infinite in um.
+        ("degradation", "precision_loss_m", 1e303, "degradation values"),
+    ],
+)
+def test_values_the_outputs_cannot_carry_are_kept_aside(
+    tmp_path: Path,
+    params: EstimatorParams,
+    worn: HealthEstimator,
+    section: str | None,
+    key: str,
+    value: float,
+    problem: str,
+) -> None:
+    store = StateStore(tmp_path / "left.json", "left")
+    store.save(worn)
+    document = json.loads(store.path.read_text())
+    state = document["estimator"]
+    (state if section is None else state[section])[key] = value
+    store.path.write_text(json.dumps(document))
+    outcome = store.restore(HealthEstimator(params))
+    assert outcome.kept_corrupt is not None and problem in outcome.problem
 
 
 def test_state_of_another_actuator_or_hardware_is_refused(

@@ -2,22 +2,30 @@
 
 from __future__ import annotations
 
+import json
 import re
 import shutil
 import signal
 import subprocess
 import sys
+import time
+import uuid
 from pathlib import Path
 
+import numpy as np
 import pytest
-from prsm_health_msgs.msg import MotorState
+import rclpy
+from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus
+from prsm_health_msgs.msg import HealthEstimate, MotorState
+from rclpy.executors import SingleThreadedExecutor
 from rclpy.qos import QoSProfile, QoSReliabilityPolicy
 
 from prsm_health.bags.writer import BagWriter, write_joint_states, write_motor_states
 from prsm_health.outputs import INPUT_HEALTH, Level
 from prsm_health.ros.messages import stamp_seconds
-from prsm_health.ros.monitor import Monitor, MonitorOptions, table
+from prsm_health.ros.monitor import Monitor, MonitorOptions, diagnostics_record, table
 from prsm_health.ros.player import ACK_TIMEOUT_S
+from prsm_health.signals import MotorSamples
 from test.ros.data import short_jam_scene, simulated_bag, synthetic_run, write_bag
 from test.ros.harness import Listener, NodeProcess, start_player, stop_process
 
@@ -61,6 +69,55 @@ def test_play_refuses_what_it_cannot_play(tmp_path: Path) -> None:
     looped = cli("play", str(empty), "--loop", timeout_s=30.0)  # it spun at 100 % CPU
     assert looped.returncode == 2
     assert "nothing to loop: the bag has no messages on the topics to play" in looped.stderr
+
+
+def test_play_refuses_rates_out_of_range(tmp_path: Path) -> None:
+    """--rate 1e-300 and --clock-rate 1e-300 were OverflowError tracebacks (the wait, the
+    clock's period); rates out of the played range are usage errors, the demo's too."""
+    bag = write_bag(tmp_path / "bag", synthetic_run(0.01))
+    refused = {
+        ("--rate", "1e-300"): "--rate must be within 0.001 .. 1e+06, got 1e-300",
+        ("--rate", "1e7"): "--rate must be within 0.001 .. 1e+06, got 1e+07",
+        ("--clock", "--clock-rate", "1e-300"): (
+            "--clock-rate must be within 0.01 .. 1e+09, got 1e-300"
+        ),
+        ("--clock-rate", "1e10"): "--clock-rate must be within 0.01 .. 1e+09, got 1e+10",
+    }
+    for args, error in refused.items():
+        done = cli("play", str(bag), *args)
+        assert (done.returncode, done.stderr) == (2, f"prsm-health: error: {error}\n"), args
+    demo = cli("demo", "--bag", str(tmp_path / "none"), "--rate", "1e-300")
+    expected = "prsm-health: error: --rate must be within 0.001 .. 1e+06, got 1e-300\n"
+    assert (demo.returncode, demo.stderr) == (2, expected)
+
+
+def test_play_waits_out_a_gap_longer_than_a_wait_can_be(ros: None, tmp_path: Path) -> None:
+    """Two messages 1e7 s apart at --rate 0.001 are due 1e10 s apart, more than
+    threading.TIMEOUT_MAX (9.2e9 s): the player published the first, then ended with an
+    OverflowError. It waits in steps instead, until interrupted."""
+    first = synthetic_run(0.002)
+    stamps = first.stamp_s + np.array([0.0, 1e7])
+    samples = MotorSamples(stamps, first.current_a, first.speed_rad_s, first.position_rad)
+    bag = write_bag(tmp_path / "bag", samples)
+    listener = Listener()
+    received: list[float] = []
+    qos = QoSProfile(depth=10, reliability=QoSReliabilityPolicy.RELIABLE)
+    listener.node.create_subscription(
+        MotorState, "/motor_state", lambda m: received.append(stamp_seconds(m.header.stamp)), qos
+    )
+    player = start_player(bag, "--rate", "0.001")
+    try:
+        listener.wait_for(lambda: bool(received), 30.0, "the first message")
+        listener.spin(1.0)
+        assert player.poll() is None, player.communicate()[0]  # waiting for the second
+        player.send_signal(signal.SIGINT)
+        out, _ = player.communicate(timeout=20)
+    finally:
+        stop_process(player)
+        listener.close()
+    assert player.returncode == 0, out
+    assert "play interrupted: /motor_state 1 published" in out
+    assert received == [stamps[0]]
 
 
 def test_play_names_the_topics_without_a_subscriber(ros: None, tmp_path: Path) -> None:
@@ -183,19 +240,115 @@ def test_monitor_refuses_an_invalid_node_name() -> None:
 
 
 def test_monitor_says_what_was_missing(ros: None) -> None:
-    """Received, but not enough printed: the count, or that no status came to print."""
-    counted = Monitor(MonitorOptions(count=3, timeout_s=2.0))
+    """Received, but not enough printed: the count, that no status came to print, or that
+    the node did not tell its hardware_id (which says which statuses are its)."""
+    counted = Monitor(MonitorOptions(count=3, timeout_s=2.0, hardware_id="left"))
     listed = Monitor(MonitorOptions(timeout_s=2.0))
     try:
         counted.records = counted.health_received = 1
         counted.timed_out = listed.timed_out = True
         assert counted.shortfall() == "1 of 3 records printed within 2 s"
         listed.health_received = 4  # in table mode only a status prints a record
-        expected = "estimates received within 2 s, but no prsm_health statuses on /diagnostics"
-        assert listed.shortfall() == expected
+        assert listed.shortfall() == (
+            "estimates received within 2 s, but /prsm_health did not tell its hardware_id"
+            " (--hardware-id ID shows the statuses of ID)"
+        )
+        listed.hardware_id = "left"
+        assert listed.shortfall() == (
+            "estimates received within 2 s, but no prsm_health statuses of hardware_id left"
+            " on /diagnostics"
+        )
     finally:
         counted.close()
         listed.close()
+
+
+@pytest.mark.timeout(180)
+def test_monitor_shows_only_the_nodes_statuses(tmp_path: Path) -> None:
+    """Two nodes publish /diagnostics: the monitor of one showed the other's statuses too
+    and counted them. It shows those of the node's hardware_id, which it asks the node."""
+    nodes = {
+        name: NodeProcess(
+            tmp_path,
+            name=name,
+            hardware_id=hardware_id,
+            state_file=str(tmp_path / f"{hardware_id}.json"),
+            input_topic=f"/{hardware_id}/motor_state",
+            diagnostics_rate_hz=5.0,
+        )
+        for name, hardware_id in (("mon_a", "left"), ("mon_b", "right"))
+    }
+    try:
+        args = ("monitor", "--node", "/mon_a", "--json", "--count", "6", "--timeout", "90")
+        done = cli(*args, timeout_s=120.0)
+    finally:
+        for node in nodes.values():
+            stop_process(node.process)
+    assert done.returncode == 0, done.stderr
+    records = [json.loads(line) for line in done.stdout.splitlines()]
+    assert [r["topic"] for r in records] == ["/diagnostics"] * 6
+    assert {s["hardware_id"] for r in records for s in r["status"]} == {"left"}
+    for record in records:  # each status once: no other node's in the same record
+        assert len({s["name"] for s in record["status"]}) == len(record["status"]) == 7
+
+
+def test_monitor_shows_foreign_messages_as_they_are(ros: None) -> None:
+    """A default HealthEstimate (no probabilities; ``ros2 topic pub`` sends one) was an
+    IndexError traceback, a status level 7 the usage error '7 is not a valid Level': both
+    are shown as what they are. The other hardware id's status is not shown; a monitor
+    without --hardware-id says this node has no hardware_id parameter."""
+    name = f"foreign_{uuid.uuid4().hex[:8]}"
+    node = rclpy.create_node(name)
+    qos = QoSProfile(depth=10, reliability=QoSReliabilityPolicy.RELIABLE)
+    health = node.create_publisher(HealthEstimate, f"/{name}/health", qos)
+    diagnostics = node.create_publisher(DiagnosticArray, "/diagnostics", qos)
+    executor = SingleThreadedExecutor()
+    executor.add_node(node)
+    statuses = [
+        DiagnosticStatus(
+            name="prsm_health: axial load", level=b"\x07", message="odd", hardware_id="odd"
+        ),
+        DiagnosticStatus(name="prsm_health: fatigue", message="other", hardware_id="other"),
+    ]
+    command = [sys.executable, "-m", "prsm_health", "monitor", "--node", name, "--count"]
+    shown = subprocess.Popen(
+        [*command, "3", "--timeout", "60", "--hardware-id", "odd"],
+        stdout=subprocess.PIPE,
+        stderr=subprocess.PIPE,
+        text=True,
+    )
+    asked = subprocess.Popen(
+        [*command, "1", "--timeout", "15"],
+        stdout=subprocess.PIPE,
+        stderr=subprocess.PIPE,
+        text=True,
+    )
+    try:
+        deadline = time.monotonic() + 90.0
+        while None in (shown.poll(), asked.poll()) and time.monotonic() < deadline:
+            if health.get_subscription_count() and diagnostics.get_subscription_count():
+                health.publish(HealthEstimate())
+                diagnostics.publish(DiagnosticArray(status=statuses))
+            executor.spin_once(timeout_sec=0.2)
+        out, err = shown.communicate(timeout=20)
+        asked_out, asked_err = asked.communicate(timeout=20)
+    finally:
+        stop_process(shown)
+        stop_process(asked)
+        executor.shutdown()
+        node.destroy_node()
+    assert (shown.returncode, err) == (0, "")
+    assert out.splitlines()[-2:] == [
+        "t 0.00 s  load 0.00 +- 0.00 kN  jammed 0 (no probabilities)  loss 0 um (0 um/h)"
+        "  fatigue 0",
+        "  level 7 (unknown) axial load         odd",
+    ]
+    assert "other" not in out  # the status of the other hardware id
+    assert (asked.returncode, asked_out) == (1, "")
+    assert asked_err == (
+        f"prsm-health monitor: 0 of 1 records printed within 15 s, but /{name} has no"
+        " hardware_id parameter (--hardware-id ID shows the statuses of ID)\n"
+    )
 
 
 def test_monitor_table() -> None:
@@ -223,6 +376,33 @@ def test_monitor_table() -> None:
     assert table(None, {"status": []}) == (  # the node may have estimated before
         "no estimate received since the monitor started (the node publishes one per new estimate)"
     )
+
+
+def test_monitor_table_of_odd_messages() -> None:
+    """Values the node never publishes (another publisher's) are shown, not refused."""
+    health = {
+        "stamp": 1.0,
+        "axial_load_n": 0.0,
+        "axial_load_std_n": 0.0,
+        "jammed_rollers_most_likely": 2,
+        "jammed_rollers_probability": [0.5, 0.5],
+        "precision_loss_um": 0.0,
+        "precision_loss_rate_um_per_h": 0.0,
+        "fatigue_damage": 0.0,
+    }
+    assert "jammed 2 (no probability of 2)" in table(health, {"status": []})
+    health["jammed_rollers_probability"] = []
+    assert "jammed 2 (no probabilities)" in table(health, {"status": []})
+    levels = [b"\x00", b"\x03", b"\x04", b"\xff"]
+    array = DiagnosticArray(
+        status=[DiagnosticStatus(name="prsm_health: x", level=v) for v in levels]
+    )
+    assert [s["level"] for s in diagnostics_record(array)["status"]] == [
+        "OK",
+        "STALE",
+        "level 4 (unknown)",
+        "level 255 (unknown)",
+    ]
 
 
 @pytest.mark.timeout(120)
