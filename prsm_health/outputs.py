@@ -23,7 +23,7 @@ import enum
 import math
 from collections import Counter
 from collections.abc import Mapping
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from typing import Any
 
 from prsm_health.estimation.estimate import S_PER_H, UM_PER_M, HealthState
@@ -95,10 +95,11 @@ class InputHealth:
 
     rate_hz: input messages received per second over the last second. last_sample_s: when the
     last one arrived, on the caller's clock (the node's clock; None before the first).
-    received: messages received since start. accepted: samples the estimator accepted.
-    rejected: samples rejected, by reason (the estimator's reasons in lower case, plus the
-    caller's own, e.g. ``joint_missing``). recent_rejected_fraction: share of the samples
-    judged over the last second that were rejected.
+    received: messages received since start. accepted: samples the estimator accepted since
+    start. rejected: samples rejected since start, by reason (the estimator's reasons in lower
+    case, plus the caller's own, e.g. ``joint_missing``). recent_rejected_fraction: share of
+    the samples judged over the last second that were rejected; recent_rejected: those, by
+    reason.
     """
 
     rate_hz: float
@@ -107,6 +108,7 @@ class InputHealth:
     accepted: int
     rejected: Mapping[str, int]
     recent_rejected_fraction: float = 0.0
+    recent_rejected: Mapping[str, int] = field(default_factory=dict)
 
 
 @dataclass(frozen=True)
@@ -289,7 +291,7 @@ def _inputs(inputs: InputHealth, th: DiagnosticThresholds, now_s: float) -> _Par
         problems.append(f"rate {inputs.rate_hz:.0f} Hz below {th.min_input_rate_hz:g} Hz")
     fraction = inputs.recent_rejected_fraction
     if fraction > 0.0 and fraction >= th.rejected_warn_fraction:
-        reasons = ", ".join(k for k, v in inputs.rejected.items() if v)
+        reasons = ", ".join(k for k, v in inputs.recent_rejected.items() if v)
         problems.append(f"{100.0 * fraction:.1f} % rejected in the last second ({reasons})")
     rejected_total = sum(inputs.rejected.values())
     message = "; ".join(problems) or (

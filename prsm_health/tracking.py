@@ -36,16 +36,24 @@ class InputTracker:
     """Messages received and samples judged, over a sliding window of :data:`WINDOW_S`.
 
     Times are the caller's clock in seconds; if it jumps back (a looped bag's sim time), the
-    window starts again.
+    window starts again. Counts are of this run: totals an estimator brings from a restored
+    state are its starting point (:meth:`start_from`), not samples judged now.
     """
 
     def __init__(self) -> None:
         self._received_total = 0
         self._last_sample_s: float | None = None
         self._received: deque[tuple[float, int]] = deque()
-        self._judged: deque[tuple[float, int, int]] = deque()  # time, accepted, rejected
-        self._accepted = 0
+        # time, newly accepted, newly rejected by reason
+        self._judged: deque[tuple[float, int, dict[str, int]]] = deque()
+        self._accepted = self._start_accepted = 0
         self._rejected: dict[str, int] = {}
+        self._start_rejected: dict[str, int] = {}
+
+    def start_from(self, accepted: int, rejected: Mapping[str, int]) -> None:
+        """The estimator's totals before this run (restored from a saved state)."""
+        self._accepted = self._start_accepted = accepted
+        self._rejected, self._start_rejected = dict(rejected), dict(rejected)
 
     def update(
         self, now_s: float, received: int, accepted: int, rejected: Mapping[str, int]
@@ -59,7 +67,11 @@ class InputTracker:
             self._last_sample_s = now_s
             self._received.append((now_s, received))
         new_accepted = accepted - self._accepted
-        new_rejected = sum(rejected.values()) - sum(self._rejected.values())
+        new_rejected = {
+            reason: count - self._rejected.get(reason, 0)
+            for reason, count in rejected.items()
+            if count != self._rejected.get(reason, 0)
+        }
         if new_accepted or new_rejected:
             self._judged.append((now_s, new_accepted, new_rejected))
         self._accepted, self._rejected = accepted, dict(rejected)
@@ -75,15 +87,21 @@ class InputTracker:
         """The input health at ``now_s``."""
         self._trim(now_s)
         accepted = sum(entry[1] for entry in self._judged)
-        rejected = sum(entry[2] for entry in self._judged)
-        judged = accepted + rejected
+        recent: Counter[str] = Counter()
+        for _, _, reasons in self._judged:
+            recent.update(reasons)
+        judged = accepted + sum(recent.values())
         return InputHealth(
             rate_hz=sum(count for _, count in self._received) / WINDOW_S,
             last_sample_s=self._last_sample_s,
             received=self._received_total,
-            accepted=self._accepted,
-            rejected=dict(self._rejected),
-            recent_rejected_fraction=rejected / judged if judged > 0 else 0.0,
+            accepted=self._accepted - self._start_accepted,
+            rejected={
+                reason: count - self._start_rejected.get(reason, 0)
+                for reason, count in self._rejected.items()
+            },
+            recent_rejected_fraction=sum(recent.values()) / judged if judged > 0 else 0.0,
+            recent_rejected=dict(recent),
         )
 
 

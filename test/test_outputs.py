@@ -174,7 +174,9 @@ def test_input_health_rate_and_rejections() -> None:
     level, message, _ = statuses(i=inputs(rate_hz=20.0))[INPUT_HEALTH]
     assert level == Level.WARN
     assert "20 Hz" in message
-    level, message, _ = statuses(i=inputs(recent_rejected_fraction=0.2))[INPUT_HEALTH]
+    level, message, _ = statuses(
+        i=inputs(recent_rejected_fraction=0.2, recent_rejected={"non_finite": 3})
+    )[INPUT_HEALTH]
     assert level == Level.WARN
     assert "non_finite" in message
 

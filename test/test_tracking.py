@@ -38,6 +38,28 @@ def test_recent_rejected_fraction() -> None:
     assert tracker.health(2.0).recent_rejected_fraction == 0.0
 
 
+def test_the_reasons_named_are_the_last_seconds() -> None:
+    """Non-finite samples at 0.5 s, stamps going back at 2.5 s: the warning at 2.9 s names only
+    the second (it named every reason of the run)."""
+    tracker = InputTracker()
+    tracker.update(0.5, 100, accepted=90, rejected={"non_finite": 10, "time_backwards": 0})
+    tracker.update(2.5, 100, accepted=170, rejected={"non_finite": 10, "time_backwards": 20})
+    health = tracker.health(2.9)
+    assert health.recent_rejected == {"time_backwards": 20}
+    assert health.rejected == {"non_finite": 10, "time_backwards": 20}
+
+
+def test_counts_restored_with_the_state_are_not_this_runs() -> None:
+    """After a restart the estimator's totals include the runs before: clean input must not
+    show as rejected (it warned '12.5 % rejected' and '400 rejected of 1251 received')."""
+    tracker = InputTracker()
+    tracker.start_from(5000, {"non_finite": 400})
+    tracker.update(0.5, 100, accepted=5100, rejected={"non_finite": 400})
+    health = tracker.health(0.9)
+    assert health.recent_rejected_fraction == 0.0 and health.recent_rejected == {}
+    assert health.accepted == 100 and health.rejected == {"non_finite": 0}
+
+
 def test_clock_jumping_back_restarts_the_window() -> None:
     tracker = InputTracker()
     tracker.update(10.0, 100, accepted=100, rejected={})

@@ -282,6 +282,10 @@ class HealthNode(LifecycleNode):
         else:
             self.get_logger().info(f"no state file at {config.state_file}: starting fresh")
         self._config, self._estimator, self._store = config, estimator, store
+        # Counts restored with the state are no input of this run.
+        self._tracker.inputs.start_from(
+            estimator.counters.accepted, rejected_by_reason(estimator.counters, self._node_rejects)
+        )
         self._health_pub = self.create_lifecycle_publisher(
             HealthEstimate, "~/health", HEALTH_QOS_DEPTH
         )
