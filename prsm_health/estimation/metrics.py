@@ -40,6 +40,7 @@ from numpy.typing import NDArray
 from scipy.stats import chi2
 
 from prsm_health.estimation.estimate import EstimateEvent, HealthState
+from prsm_health.jsonvalues import json_safe
 from prsm_health.signals import TruthSamples
 
 FloatArray = NDArray[np.float64]
@@ -87,18 +88,7 @@ class Metrics:
         load RMSE without an estimate in motion) is null, which JSON has and NaN is not."""
         data = asdict(self)
         data["jams"] = [asdict(j) for j in self.jams]
-        return {key: _json_value(value) for key, value in data.items()}
-
-
-def _json_value(value: object) -> object:
-    """``value`` with every non-finite float in it replaced by None."""
-    if isinstance(value, float):
-        return value if math.isfinite(value) else None
-    if isinstance(value, (list, tuple)):
-        return [_json_value(v) for v in value]
-    if isinstance(value, dict):
-        return {k: _json_value(v) for k, v in value.items()}
-    return value
+        return {key: json_safe(value) for key, value in data.items()}
 
 
 def _truth_at(truth: TruthSamples, stamps: FloatArray) -> NDArray[np.int64]:

@@ -39,6 +39,7 @@ from rclpy.executors import SingleThreadedExecutor
 from rclpy.qos import QoSProfile, QoSReliabilityPolicy
 from rclpy.validate_full_topic_name import validate_full_topic_name
 
+from prsm_health.jsonvalues import json_safe
 from prsm_health.outputs import Level
 from prsm_health.ros.messages import stamp_seconds
 
@@ -207,7 +208,7 @@ class Monitor:
         self.latest_health = health_record(msg)
         self.health_received += 1
         if self.options.json:
-            self._emit(json.dumps({"topic": "health", **self.latest_health}))
+            self._emit(json.dumps(json_safe({"topic": "health", **self.latest_health})))
 
     def _on_diagnostics(self, msg: Any) -> None:
         record = diagnostics_record(msg)
@@ -223,7 +224,7 @@ class Monitor:
             return
         self.latest_diagnostics = record
         if self.options.json:
-            self._emit(json.dumps({"topic": "/diagnostics", **record}))
+            self._emit(json.dumps(json_safe({"topic": "/diagnostics", **record})))
         else:
             self._emit(table(self.latest_health, record))
 
