@@ -11,7 +11,10 @@ Time handling: a stamp that does not advance is rejected (TIME_BACKWARDS). If th
 coming from a jumped-back clock, advancing on their own for ``filter.time_reset_after_s`` and
 over at least TIME_RESET_SAMPLES samples, the new time line is accepted and the next block
 carries ``time_reset``. A gap longer than
-``filter.max_gap_s`` between accepted samples starts a new block with ``after_gap``.
+``filter.max_gap_s`` between accepted samples starts a new block with ``after_gap``. A stamp
+that jumps ahead by more than ``filter.max_gap_s`` waits for the next accepted one: if that
+falls back between the two, the jump was a single wrong stamp and is rejected
+(TIME_BACKWARDS: out of order), instead of every sample after it until a time reset.
 """
 
 from __future__ import annotations
@@ -168,14 +171,20 @@ class SampleBlocker:
         self._time_reset = False
         self._previous_current = math.nan  # last sample before the pending ones
         self._stuck_run = 0  # length of the identical-current run ending there
+        self._held: MotorSamples | None = None  # a last sample that jumped ahead (module doc)
 
     def feed(self, samples: MotorSamples) -> list[Block]:
         """Validate ``samples`` and return the blocks they complete (in time order)."""
+        if self._held is not None:  # judged again, with what follows it
+            samples, self._held = MotorSamples.concatenate([self._held, samples]), None
         ok = self._in_range(samples)
+        before = self._last_stamp
         ok, resets = self._advance_time(samples.stamp_s, ok)
+        every = bool(ok.all())  # the common case: nothing to select
+        if self._hold_a_jump(samples, ok, every, resets, before):
+            every = False
         blocks: list[Block] = []
         begin = 0
-        every = bool(ok.all())  # the common case: nothing to select
         for reset in [*resets, len(samples)]:
             part = samples[begin:reset]
             accepted = part if every else part[ok[begin:reset]]
@@ -191,8 +200,13 @@ class SampleBlocker:
         return blocks
 
     def flush(self) -> list[Block]:
-        """Blocks from the samples still pending (end of a bag)."""
-        return self._blocks(self._pending, final=True)
+        """Blocks from the samples still pending (end of a bag); a held sample is accepted,
+        nothing came to contradict it."""
+        pending = self._pending
+        if self._held is not None:
+            pending = MotorSamples.concatenate([pending, self._held])
+            self._last_stamp, self._held = float(self._held.stamp_s[0]), None
+        return self._blocks(pending, final=True)
 
     # --- per-sample checks --------------------------------------------------------------
     def _count(self, reason: RejectReason, mask: BoolArray) -> None:
@@ -232,9 +246,21 @@ class SampleBlocker:
         keep = ok.copy()
         resets = []
         reset_after = self._params.filter.time_reset_after_s
+        max_gap = self._params.filter.max_gap_s
+        jumped: int | None = None  # the latest accepted sample, if it jumped ahead
+        left = -math.inf  # the stamp it jumped from
         for i, stamp in zip(index.tolist(), t.tolist(), strict=True):
             if stamp > self._last_stamp:
+                jumped, left = (
+                    (i, self._last_stamp) if stamp - self._last_stamp > max_gap else (None, left)
+                )
                 self._last_stamp, self._backwards_since = stamp, None
+                continue
+            if jumped is not None and stamp > left:
+                # Back into the time line the latest sample jumped from: that one was wrong.
+                keep[jumped] = False
+                self.counters.rejected[RejectReason.TIME_BACKWARDS] += 1
+                self._last_stamp, self._backwards_since, jumped = stamp, None, None
                 continue
             if self._backwards_since is None or stamp < self._backwards_last:
                 # A jumped-back line starts here (a stamp going back on it starts another).
@@ -253,6 +279,32 @@ class SampleBlocker:
             keep[i] = False
             self.counters.rejected[RejectReason.TIME_BACKWARDS] += 1
         return keep, resets
+
+    def _hold_a_jump(
+        self, samples: MotorSamples, ok: BoolArray, every: bool, resets: list[int], before: float
+    ) -> bool:
+        """Hold back the chunk's last accepted sample (unmark it in ``ok``) if it jumped ahead
+        of the one before it (``before``: the last accepted stamp before the chunk) by more
+        than ``filter.max_gap_s``: the next chunk tells whether it was a wrong stamp. ``every``:
+        all of ``ok`` is set (the common case, judged from two stamps)."""
+        stamps = samples.stamp_s
+        if every:  # without building an index: the node calls this for every few samples
+            last = len(stamps) - 1
+            previous = float(stamps[-2]) if last > 0 else before
+        else:
+            accepted = np.flatnonzero(ok)
+            if len(accepted) == 0:
+                return False
+            last = int(accepted[-1])
+            previous = float(stamps[accepted[-2]]) if len(accepted) > 1 else before
+        if last < 0 or not stamps[last] - previous > self._params.filter.max_gap_s:
+            return False
+        if last in resets:  # the first sample of a time line followed after a jump back
+            return False
+        self._held = samples[np.array([last])]  # a copy
+        self._last_stamp = previous
+        ok[last] = False
+        return True
 
     # --- checks on complete blocks ------------------------------------------------------
     def _spikes_and_stuck(self, current: FloatArray, processed: int, final: bool) -> BoolArray:

@@ -192,6 +192,36 @@ def test_a_gap_is_a_gap_whatever_the_chunking(size: int) -> None:
     assert sum(b.after_gap for b in blocks) == 1 and blocker.counters.gaps == 1
 
 
+@pytest.mark.parametrize("size", [1, 7, 501, 2000])
+def test_one_stamp_far_ahead_is_rejected_not_the_samples_after_it(size: int) -> None:
+    """One sample stamped 30 years ahead in a clean stream: it is rejected as out of order,
+    whatever the chunks. (It was accepted, and the next 100 good samples were rejected as
+    going backwards until a time reset followed them.)"""
+    samples = run(2.0)
+    stamps = samples.stamp_s.copy()
+    stamps[500] += 30 * 365.25 * 86400.0
+    faulty = MotorSamples(stamps, samples.current_a, samples.speed_rad_s, samples.position_rad)
+    blocks, blocker = feed_in_chunks(faulty, size)
+    assert blocker.counters.rejected[RejectReason.TIME_BACKWARDS] == 1
+    assert blocker.counters.accepted == len(samples) - 1
+    assert blocker.counters.time_resets == 0 and blocker.counters.gaps == 0
+    assert not any(b.time_reset or b.after_gap for b in blocks)
+    assert max(b.stamp_s for b in blocks) < stamps[-1]
+
+
+def test_a_clock_that_jumps_ahead_for_good_is_a_gap_whatever_the_chunks() -> None:
+    """The same jump kept by every sample after it (a clock set to the epoch): a gap, and no
+    sample lost, also when the jump is the last sample of a chunk."""
+    samples = run(2.0)
+    stamps = samples.stamp_s.copy()
+    stamps[500:] += 30 * 365.25 * 86400.0
+    jumped = MotorSamples(stamps, samples.current_a, samples.speed_rad_s, samples.position_rad)
+    for size in (1, 501, 2000):
+        blocks, blocker = feed_in_chunks(jumped, size)
+        assert blocker.counters.accepted == len(samples), size
+        assert blocker.counters.gaps == 1 and sum(b.after_gap for b in blocks) == 1, size
+
+
 def test_a_gap_after_a_flush_is_a_gap() -> None:
     # The node flushes when its input has been silent for a while.
     samples = run(2.0)
