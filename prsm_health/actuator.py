@@ -127,9 +127,7 @@ class Actuator:
     wear_acceleration: float = 1.0
 
     def __post_init__(self) -> None:
-        scale = require_real(self.wear_acceleration, "actuator.wear_acceleration")
-        require(scale > 0.0, "actuator.wear_acceleration", f"must be > 0, got {scale!r}")
-        object.__setattr__(self, "wear_acceleration", scale)
+        require_finite_positive(self, "actuator")  # wear_acceleration, its one float
 
     def loading_case(self, motor_speed_rad_s: float) -> LoadingCase:
         """The loading case for the motor's direction of rotation (forward at standstill)."""

@@ -154,12 +154,7 @@ def repair_covariance(matrix: FloatArray, floor: FloatArray | None = None) -> Fl
 
 
 def ripple_axis(
-    ripple: FloatArray,
-    covariance: FloatArray,
-    axis: FloatArray | None,
-    *,
-    moving: bool,
-    phase_known_rad: float,
+    ripple: FloatArray, axis: FloatArray | None, *, moving: bool, known: bool
 ) -> FloatArray | None:
     """The axis u = r / |r| the ripple phasor r = (c, s) walks along (:func:`ripple_walk`), or
     None while its phase has never been known.
@@ -167,13 +162,12 @@ def ripple_axis(
     A jammed roller's ripple is the first carrier harmonic of its sliding torque: its amplitude
     follows the radial load (0.53 N m per kN on dong2022-downhole, whatever the axial load), its
     phase is set by where the jammed rollers sit on the carrier and does not change
-    (docs/estimation.md). The phase is known in motion when its standard deviation
-    sqrt(v' P v) / |r|^2 is below ``phase_known_rad``, v = (-s, c) the direction across r. The
-    axis is refreshed while the phase is known and kept when it no longer is: the amplitude
-    may shrink through zero with the radial load, and must not turn the phase on the way (a
-    second jammed roller does turn it).
+    (docs/estimation.md). ``known``: the phase is known (:func:`phase_known`); it is learned in
+    motion only. The axis is refreshed while the phase is known and kept when it no longer is:
+    the amplitude may shrink through zero with the radial load, and must not turn the phase on
+    the way (a second jammed roller does turn it).
     """
-    if moving and phase_known(ripple, covariance, phase_known_rad):
+    if moving and known:
         c, s = float(ripple[0]), float(ripple[1])
         return np.array([c, s]) / math.sqrt(c * c + s * s)
     return axis
@@ -506,19 +500,11 @@ class JamHypotheses:
             transition, noise = self._process(dt, jerk_psd)
             polar = None
             if self._ripple and h.count:
+                known = phase_known(kf.x[RIPPLE], kf.P[RIPPLE, RIPPLE], phase_known_rad)
                 h.ripple_axis = ripple_axis(
-                    kf.x[RIPPLE],
-                    kf.P[RIPPLE, RIPPLE],
-                    h.ripple_axis,
-                    moving=bool(block.direction),
-                    phase_known_rad=phase_known_rad,
+                    kf.x[RIPPLE], h.ripple_axis, moving=bool(block.direction), known=known
                 )
-                if (
-                    load_transition
-                    and h.ripple_axis is not None
-                    and self._ekf
-                    and phase_known(kf.x[RIPPLE], kf.P[RIPPLE, RIPPLE], phase_known_rad)
-                ):
+                if load_transition and h.ripple_axis is not None and self._ekf and known:
                     polar = polar_about(kf.x)
                 if polar is None:
                     noise = self._ripple_noise(h, noise, dt)

@@ -47,23 +47,24 @@ class Preset:
     largest_speed_rpm: float
 
     def __post_init__(self) -> None:
-        axial = require_real(self.largest_axial_load_n, "largest_axial_load_n")
+        for name in ("largest_axial_load_n", "largest_radial_load_n", "largest_speed_rpm"):
+            object.__setattr__(self, name, require_real(getattr(self, name), name))
         require(
-            axial >= MIN_AXIAL_LOAD_N,
+            self.largest_axial_load_n >= MIN_AXIAL_LOAD_N,
             "largest_axial_load_n",
             f"must be at least {MIN_AXIAL_LOAD_N:g} N (the load tables and the filter's scales "
-            f"are fractions of it), got {axial!r}",
+            f"are fractions of it), got {self.largest_axial_load_n!r}",
         )
-        radial = require_real(self.largest_radial_load_n, "largest_radial_load_n")
-        require(radial >= 0.0, "largest_radial_load_n", f"must be >= 0 N, got {radial!r}")
-        speed = require_real(self.largest_speed_rpm, "largest_speed_rpm")
-        require(speed > 0.0, "largest_speed_rpm", f"must be > 0 rpm, got {speed!r}")
-        for name, value in (
-            ("largest_axial_load_n", axial),
-            ("largest_radial_load_n", radial),
-            ("largest_speed_rpm", speed),
-        ):
-            object.__setattr__(self, name, value)
+        require(
+            self.largest_radial_load_n >= 0.0,
+            "largest_radial_load_n",
+            f"must be >= 0 N, got {self.largest_radial_load_n!r}",
+        )
+        require(
+            self.largest_speed_rpm > 0.0,
+            "largest_speed_rpm",
+            f"must be > 0 rpm, got {self.largest_speed_rpm!r}",
+        )
 
 
 def preset_from_mapping(data: dict[str, Any]) -> Preset:

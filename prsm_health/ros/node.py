@@ -170,12 +170,14 @@ class HealthNode(LifecycleNode):
         """Values given at start (``-p``, a params file) for parameters nobody declared: a
         misspelt name would otherwise leave the default in place without a word. (rclpy keeps
         the overrides only in Node._parameter_overrides.)"""
-        unknown = [name for name in self._parameter_overrides if not self.has_parameter(name)]
-        return {
-            name: "unknown parameter"
-            + (f" (did you mean {close[0]}?)" if (close := get_close_matches(name, SPECS)) else "")
-            for name in unknown
-        }
+        errors = {}
+        for name in self._parameter_overrides:
+            if not self.has_parameter(name):
+                close = get_close_matches(name, SPECS, n=1)
+                errors[name] = "unknown parameter" + (
+                    f" (did you mean {close[0]}?)" if close else ""
+                )
+        return errors
 
     def _guard_transitions(self) -> None:
         """Answer a lifecycle transition id the current state does not have with success=False.
@@ -303,20 +305,13 @@ class HealthNode(LifecycleNode):
         config = self._config
         if config is None:  # the lifecycle activates only configured nodes
             return TransitionCallbackReturn.FAILURE
-        reliability = (
-            QoSReliabilityPolicy.RELIABLE
-            if config.input_qos == "reliable"
-            else QoSReliabilityPolicy.BEST_EFFORT
-        )
         # Reliable input keeps every sample (KEEP_ALL: a full queue holds the publisher back;
         # KEEP_LAST would overwrite samples that DDS has already acknowledged).
-        qos = QoSProfile(
-            depth=config.input_queue_depth,
-            history=QoSHistoryPolicy.KEEP_ALL
-            if config.input_qos == "reliable"
-            else QoSHistoryPolicy.KEEP_LAST,
-            reliability=reliability,
-        )
+        if config.input_qos == "reliable":
+            history, reliability = QoSHistoryPolicy.KEEP_ALL, QoSReliabilityPolicy.RELIABLE
+        else:
+            history, reliability = QoSHistoryPolicy.KEEP_LAST, QoSReliabilityPolicy.BEST_EFFORT
+        qos = QoSProfile(depth=config.input_queue_depth, history=history, reliability=reliability)
         if config.input_type == "motor_state":
             self._subscription = self.create_subscription(
                 MotorState, config.input_topic, self._on_input, qos

@@ -14,6 +14,7 @@ from prsm_health.estimation import hypotheses
 from prsm_health.estimation.hypotheses import (
     Hypothesis,
     JamHypotheses,
+    phase_known,
     repair_covariance,
     ripple_axis,
     ripple_walk,
@@ -272,10 +273,18 @@ WALK = {"along_per_sqrt_s": 0.1, "across_per_sqrt_s": 0.01}
 PHASE_KNOWN = 0.5
 
 
+def axis_of(
+    ripple: np.ndarray, covariance: np.ndarray, axis: np.ndarray | None = None, moving: bool = True
+) -> np.ndarray | None:
+    """:func:`ripple_axis` with the phase judged by :func:`phase_known` at PHASE_KNOWN."""
+    known = phase_known(ripple, covariance, PHASE_KNOWN)
+    return ripple_axis(ripple, axis, moving=moving, known=known)
+
+
 def test_a_ripple_of_unknown_phase_walks_in_every_direction() -> None:
     """Phase std about 1 rad (perpendicular std 0.3 on an amplitude of 0.3): isotropic."""
     ripple = np.array([0.3, 0.0])
-    axis = ripple_axis(ripple, np.eye(2) * 0.09, None, moving=True, phase_known_rad=PHASE_KNOWN)
+    axis = axis_of(ripple, np.eye(2) * 0.09)
     assert axis is None
     np.testing.assert_allclose(ripple_walk(axis, dt=0.04, **WALK), np.eye(2) * 0.1**2 * 0.04)
 
@@ -285,7 +294,7 @@ def test_a_ripple_of_known_phase_walks_along_its_phasor_only() -> None:
     phasor), the phase hardly moves (0.01/sqrt(s) across it)."""
     ripple = np.array([0.3, 0.4])  # amplitude 0.5
     covariance = np.eye(2) * 0.05**2
-    axis = ripple_axis(ripple, covariance, None, moving=True, phase_known_rad=PHASE_KNOWN)
+    axis = axis_of(ripple, covariance)
     assert axis is not None
     np.testing.assert_allclose(axis, [0.6, 0.8])
     q = ripple_walk(axis, dt=0.04, **WALK)
@@ -303,11 +312,11 @@ def test_the_phase_is_judged_across_the_phasor_with_its_correlations() -> None:
     ripple = np.array([0.3, 0.4])
     u, v = np.array([0.6, 0.8]), np.array([-0.8, 0.6])
     correlated = 0.7**2 * np.outer(u, u) + 0.05**2 * np.outer(v, v)
-    axis = ripple_axis(ripple, correlated, None, moving=True, phase_known_rad=PHASE_KNOWN)
+    axis = axis_of(ripple, correlated)
     assert axis is not None
     np.testing.assert_allclose(axis, u)
     uncorrelated = np.diag(np.diagonal(correlated))
-    none = ripple_axis(ripple, uncorrelated, None, moving=True, phase_known_rad=PHASE_KNOWN)
+    none = axis_of(ripple, uncorrelated)
     assert none is None
 
 
@@ -316,12 +325,12 @@ def test_the_ripple_axis_is_kept_when_the_amplitude_shrinks_and_not_set_at_stand
     phase, but keeps its axis: it cannot turn by passing through zero. At standstill the
     carrier does not turn, so no axis is learned there."""
     known = np.eye(2) * 0.05**2
-    axis = ripple_axis(np.array([0.5, 0.0]), known, None, moving=True, phase_known_rad=PHASE_KNOWN)
-    kept = ripple_axis(np.array([0.01, 0.0]), known, axis, moving=True, phase_known_rad=PHASE_KNOWN)
+    axis = axis_of(np.array([0.5, 0.0]), known)
+    kept = axis_of(np.array([0.01, 0.0]), known, axis)
     assert kept is axis
     q = ripple_walk(kept, dt=0.04, **WALK)
     assert float(np.array([0.0, 1.0]) @ q @ np.array([0.0, 1.0])) == pytest.approx(0.01**2 * 0.04)
-    none = ripple_axis(np.array([0.5, 0.0]), known, None, moving=False, phase_known_rad=PHASE_KNOWN)
+    none = axis_of(np.array([0.5, 0.0]), known, moving=False)
     assert none is None
 
 
