@@ -1,5 +1,5 @@
 # prsm_health: reproducible environment, lint, tests and demo.
-# `make venv` builds everything from scratch on a fresh clone (see shared/ROS_PIP.md).
+# `make venv` builds everything from scratch on a fresh clone (see ../shared/ROS_PIP.md).
 
 SHELL := /bin/bash
 .SHELLFLAGS := -euo pipefail -c

@@ -107,11 +107,15 @@ PARAMETERS: tuple[ParameterSpec, ...] = (
     ParameterSpec(
         "input_qos",
         "sensor_data",
-        "input QoS: sensor_data (best effort) or reliable; both keep input_queue_depth",
+        "input QoS: sensor_data (best effort, keeps the last input_queue_depth) or reliable "
+        "(keeps all: a full queue holds the publisher back)",
         choices=("sensor_data", "reliable"),
     ),
     ParameterSpec(
-        "input_queue_depth", 1000, "input subscription queue depth [messages]", (1, 100_000)
+        "input_queue_depth",
+        1000,
+        "best-effort input queue depth [messages] (reliable input keeps all)",
+        (1, 100_000),
     ),
     ParameterSpec(
         "batch_period_s",
