@@ -9,7 +9,10 @@ stamped with the wall clock at publish time; and this process, which receives
 Reports: messages dropped (published minus what the node's input-health status says it
 received, after the run; floor 0 at 1 kHz on 2 cores); the median and p99 latency from the
 header stamp of the last sample of a block to the arrival of that block's HealthEstimate here
-(both on the wall clock of this machine); and the node's CPU use in cores.
+(both on the wall clock of this machine); the node's CPU use in cores; and its resident
+memory (VmRSS), sampled once a second while the samples flow: at the start, at the end, and
+its growth per hour, the slope of a straight line through the second half of the run (the
+first half holds the warm-up: tables built, filters allocated), which a leak keeps above zero.
 
     .venv/bin/python bench/bench_node.py [--seconds 20] [--rate-hz 1000] [--batch-period-s S]
 """
@@ -80,6 +83,20 @@ def cpu_seconds(pid: int) -> float:
     return (int(fields[11]) + int(fields[12])) / CLOCK_TICKS
 
 
+def resident_mib(pid: int) -> float:
+    """Resident memory of a process (VmRSS) [MiB]."""
+    for line in Path(f"/proc/{pid}/status").read_text().splitlines():
+        if line.startswith("VmRSS:"):
+            return int(line.split()[1]) / 1024.0
+    raise RuntimeError(f"no VmRSS for process {pid}")
+
+
+def growth_mib_per_h(samples: list[tuple[float, float]]) -> float:
+    """Slope of a least-squares line through the second half of (time [s], MiB) [MiB/h]."""
+    times, mib = np.asarray(samples[len(samples) // 2 :]).T
+    return float(np.polyfit(times, mib, 1)[0] * 3600.0)
+
+
 def latencies(stamps: np.ndarray, received: list[tuple[float, float]]) -> np.ndarray:
     """Arrival time minus the stamp of the last sample of each estimate's block [s]."""
     anchor = stamps[0]
@@ -145,8 +162,12 @@ def main() -> None:
             publisher = subprocess.Popen(  # noqa: S603 - our own interpreter and script
                 [sys.executable, "-c", PUBLISHER, str(args.rate_hz), str(args.seconds), stamps_file]
             )
+            memory = [(0.0, resident_mib(node.pid))]
             while publisher.poll() is None:
                 executor.spin_once(timeout_sec=0.05)
+                elapsed = time.monotonic() - wall_start
+                if elapsed >= memory[-1][0] + 1.0:
+                    memory.append((elapsed, resident_mib(node.pid)))
             cpu = (cpu_seconds(node.pid) - cpu_start) / (time.monotonic() - wall_start)
             end = time.monotonic() + 2.5  # the node's next diagnostics, after the last sample
             while time.monotonic() < end:
@@ -167,6 +188,9 @@ def main() -> None:
             "latency_p99_ms": round(float(np.percentile(lat, 99)), 2),
             "latency_max_ms": round(float(lat.max()), 2),
             "node_cpu_cores": round(cpu, 2),
+            "node_rss_start_mib": round(memory[0][1], 1),
+            "node_rss_end_mib": round(memory[-1][1], 1),
+            "node_rss_growth_mib_per_h": round(growth_mib_per_h(memory), 2),
         }
         print(json.dumps(report))
 
