@@ -21,7 +21,12 @@ import numpy as np
 
 from prsm_health.estimation.degradation import Degradation, DegradationIntegrator
 from prsm_health.estimation.estimate import EstimateEvent, HealthState
-from prsm_health.estimation.hypotheses import DIVERGED_LOAD_RATIO, JamHypotheses, StepResult
+from prsm_health.estimation.hypotheses import (
+    DIVERGED_LOAD_RATIO,
+    Hypothesis,
+    JamHypotheses,
+    StepResult,
+)
 from prsm_health.estimation.inputs import Block, InputCounters, SampleBlocker, merge_blocks
 from prsm_health.estimation.measurement import LOAD, TorqueModel
 from prsm_health.estimation.params import MIN_BLOCKS_FOR_DIVERGENCE, EstimatorParams
@@ -81,6 +86,7 @@ class HealthEstimator:
         self._blocker = SampleBlocker(params)
         self._model = TorqueModel(params)
         self._bank = JamHypotheses(params, self._model)
+        self._torque_scale_error = params.noise.torque_scale_error_rel
         self._degradation = DegradationIntegrator(
             wear_coefficient_sigma_ln=params.model.wear_coefficient_sigma_ln,
             radial_relative_sensitivity=_radial_sensitivity(params),
@@ -327,7 +333,7 @@ class HealthEstimator:
         moving = block.direction != 0
         if moving or not self.params.fidelity.skip_standstill:
             duration = min(block.duration_s, self.params.filter.max_gap_s)
-            load_std = [math.sqrt(h.filter.P[LOAD, LOAD]) for h in hypotheses]
+            load_std = [math.sqrt(self._load_variance(h)) for h in hypotheses]
             self._degradation.add(duration, weights, step.predictions, load_std)
         else:
             self._degradation.stop()
@@ -386,7 +392,7 @@ class HealthEstimator:
         loads = [float(h.filter.x[LOAD]) for h in hypotheses]
         load = sum(w * f for w, f in zip(weights, loads, strict=True))
         load_var = sum(
-            w * (float(h.filter.P[LOAD, LOAD]) + (f - load) ** 2)
+            w * (self._load_variance(h) + (f - load) ** 2)
             for w, f, h in zip(weights, loads, hypotheses, strict=True)
         )
         friction = sum(
@@ -403,6 +409,12 @@ class HealthEstimator:
             event=event,
             **self._standing_fields(),
         )
+
+    def _load_variance(self, h: Hypothesis) -> float:
+        """A hypothesis' load variance [N^2]: its filter's, plus the torque scale's fixed
+        error (``noise.torque_scale_error_rel``) times its load, squared."""
+        load = float(h.filter.x[LOAD])
+        return float(h.filter.P[LOAD, LOAD]) + (self._torque_scale_error * load) ** 2
 
     def _standing_fields(self) -> dict[str, Any]:
         """The fields of an estimate that the estimator's state holds between blocks: jam

@@ -57,12 +57,20 @@ class NoiseParams:
     sample. model_error_rel: relative error of the torque model (surrogate, unmodelled
     harmonics, radial load unknown), added to the measurement variance of each block.
     model_error_floor_nm: absolute floor of that error, motor side.
+    torque_scale_error_rel: standard uncertainty of the torque per newton of load, relative:
+    the drive train's calibration (torque constant, gear efficiency) and the friction
+    coefficients. Not a noise: one fixed error, the same in every block, which makes every load
+    wrong by about that fraction and which the motor signals cannot show (it scales the load).
+    It is not filtered but added to each hypothesis' load variance as (error x load)^2 in the
+    reported load's uncertainty and the wear and fatigue integration (0: the parameters are
+    exact, as in the simulated scenes; docs/estimation.md, "When the parameters are wrong").
     """
 
     current_std_a: float = 0.05
     speed_std_rad_s: float = 0.2
     model_error_rel: float = 0.0015
     model_error_floor_nm: float = 0.005
+    torque_scale_error_rel: float = 0.0
 
     def __post_init__(self) -> None:
         _require_ranges(
@@ -73,6 +81,7 @@ class NoiseParams:
                 "speed_std_rad_s": (1e-6, 1e3),
                 "model_error_rel": (0.0, 1.0),
                 "model_error_floor_nm": (1e-9, 1e3),
+                "torque_scale_error_rel": (0.0, 0.5),
             },
         )
 

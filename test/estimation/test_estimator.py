@@ -366,3 +366,39 @@ def test_maintenance_resets_the_count_and_only_what_was_replaced() -> None:
     kept = (other.process(result.motor[cut:]) + other.finish())[0]
     assert kept.precision_loss_m == before.precision_loss_m
     assert kept.fatigue_damage == kept.fatigue_damage_std == 0.0
+
+
+def test_a_torque_constant_off_by_five_percent_is_in_the_load_uncertainty_when_stated() -> None:
+    """The motor's torque constant 5 % larger in the estimator than in the simulated drive:
+    every load reads about 5 % high, which no signal can show. Unstated
+    (noise.torque_scale_error_rel 0), the load's uncertainty is the filter's alone and the
+    errors lie far outside it; stated as 5 %, the load's variance carries (0.05 F)^2, the
+    errors are inside it, and the precision loss's uncertainty grows with it."""
+    scene = scene_from_mapping(downhole())
+    result = simulate(scene)
+    drive = scene.actuator.drive_train
+    miscalibrated = dataclasses.replace(
+        scene.actuator,
+        drive_train=dataclasses.replace(
+            drive, torque_constant_nm_per_a=1.05 * drive.torque_constant_nm_per_a
+        ),
+    )
+    outcomes = {}
+    for stated in (0.0, 0.05):
+        base = params_for(scene, Fidelity())
+        params = dataclasses.replace(
+            base,
+            actuator=miscalibrated,
+            noise=dataclasses.replace(base.noise, torque_scale_error_rel=stated),
+        )
+        states, _ = chunked(params, result.motor)
+        outcomes[stated] = (states, scored(states, result.truth, params))
+    (exact_states, unstated), (stated_states, stated_metrics) = outcomes[0.0], outcomes[0.05]
+    assert unstated.load_nees_mean > unstated.load_nees_interval[1]
+    assert stated_metrics.load_nees_consistent
+    # The same estimates, only their uncertainty differs, by (0.05 F)^2 in variance.
+    for a, b in zip(exact_states, stated_states, strict=True):
+        assert b.axial_load_n == a.axial_load_n
+        expected = math.hypot(a.axial_load_std_n, 0.05 * a.axial_load_n)
+        assert b.axial_load_std_n == pytest.approx(expected, rel=1e-6)
+    assert stated_states[-1].precision_loss_std_m > exact_states[-1].precision_loss_std_m
