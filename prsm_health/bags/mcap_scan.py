@@ -367,6 +367,16 @@ class BagScanner:
             topics.update({c.topic: c.msgtype for c in found.summary_channels.values()})
         return topics
 
+    def topics(self) -> dict[str, str]:
+        """Topic -> message type of every channel in the segments before any damage.
+
+        A pass over every segment that collects no message (a ROS topic name is never
+        empty); it sets :attr:`damage` as :meth:`batches` does.
+        """
+        for _ in self.batches(""):
+            pass
+        return dict(self.seen)
+
     def _fail(self, found: _File, damage: _DamageError | _MismatchError) -> None:
         self.damage = damage.error(found.path)
 

@@ -1,9 +1,14 @@
 """``prsm-health play``: publish a rosbag2 bag's messages over DDS with their original timing.
 
 A replacement for ``ros2 bag play`` (not on PyPI for Jazzy). Messages are read raw with
-rosbags (MCAP or SQLite rosbag2 directories) and published as the serialized CDR bytes they
-are, through rclpy publishers of their types, in log-time order, at ``log time / rate`` after
-the start. Optionally ``/clock`` (rosgraph_msgs/Clock) carries the log time, for nodes with
+rosbags (MCAP or SQLite rosbag2 directories, bare ``.mcap`` files) and published as the
+serialized CDR bytes they are, through rclpy publishers of their types, in log-time order, at
+``log time / rate`` after the start. A damaged MCAP bag (cut short, a corrupt chunk), which
+rosbags cannot open, is read up to the damage with
+:func:`~prsm_health.bags.raw.read_raw_messages` (into memory) and played the same way; the
+damage is in the :class:`PlayReport`. :class:`BagSource` is what the player needs of either.
+
+Optionally ``/clock`` (rosgraph_msgs/Clock) carries the log time, for nodes with
 ``use_sim_time``. Publishers are reliable (a best-effort subscriber matches them as well) and
 keep ``PUBLISHER_DEPTH`` messages.
 
@@ -24,7 +29,8 @@ import math
 import threading
 import time
 from collections import Counter
-from collections.abc import Sequence
+from collections.abc import Callable, Collection, Iterable, Iterator
+from contextlib import contextmanager
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
@@ -35,6 +41,8 @@ from rclpy.qos import QoSProfile, QoSReliabilityPolicy
 from rosbags.rosbag2 import Reader, ReaderError
 from rosgraph_msgs.msg import Clock
 
+from prsm_health.bags.errors import BagError
+from prsm_health.bags.raw import read_raw_messages
 from prsm_health.ros.messages import time_msg
 from prsm_health.ros.runtime import message_class
 
@@ -62,7 +70,8 @@ LONGEST_WAIT_S = 3600.0
 
 
 class PlayError(RuntimeError):
-    """The play failed while it ran (no subscriber in time)."""
+    """The play failed while it ran (no subscriber in time), or a damaged bag has nothing to
+    play before its damage."""
 
 
 class PlayInputError(ValueError):
@@ -104,14 +113,16 @@ def _require_within(option: str, value: float, bounds: tuple[float, float]) -> N
 
 @dataclass
 class PlayReport:
-    """Messages published per topic, passes through the bag, the largest lateness [s], and
-    the topics whose reliable subscribers had not acknowledged everything at the end."""
+    """Messages published per topic, passes through the bag, the largest lateness [s], the
+    topics whose reliable subscribers had not acknowledged everything at the end, and the
+    damage of a damaged bag (the messages before it were played)."""
 
     published: Counter[str] = field(default_factory=Counter)
     passes: int = 0
     max_late_s: float = 0.0
     interrupted: bool = False
     unacknowledged: list[str] = field(default_factory=list)
+    damage: BagError | None = None
 
 
 class _Clock:
@@ -164,50 +175,111 @@ def _has_reliable_subscriber(node: Any, topic: str) -> bool:
     )
 
 
-def play(bag: Path, options: PlayOptions, stop: threading.Event) -> PlayReport:
-    """Play ``bag`` (rclpy must be initialised) until its end, or until ``stop`` is set."""
+@dataclass(frozen=True)
+class BagSource:
+    """A bag as the player plays it.
+
+    ``types``: topic -> message type of every topic of the bag (of a damaged bag: met before
+    the damage). ``counts``: the messages of each topic to play. ``messages``: a new pass over
+    those, in log-time order, as ``(topic, log time [ns], CDR bytes)``. ``damage``: what ended
+    the reading of a damaged bag (None: the bag is intact).
+    """
+
+    types: dict[str, str]
+    counts: dict[str, int]
+    messages: Callable[[], Iterable[tuple[str, int, bytes]]]
+    damage: BagError | None = None
+
+
+@contextmanager
+def open_bag(bag: Path, topics: Collection[str]) -> Iterator[BagSource]:
+    """The bag at ``bag`` with the messages of ``topics`` (all if empty) to play: with rosbags,
+    or, if rosbags cannot open it, as a damaged MCAP bag read up to the damage.
+
+    Raises:
+        PlayInputError: neither can open it (missing, not MCAP, not a bag).
+    """
     try:
         reader = Reader(bag)
         reader.open()
     except (ReaderError, OSError) as exc:
-        raise PlayInputError(
-            f"cannot open bag {bag}: {exc} (a damaged bag, e.g. cut short, is read up to the "
-            "damage by prsm-health replay)"
-        ) from exc
+        unopened = exc
+    else:
+        try:
+            yield _rosbags_source(reader, topics)
+        finally:
+            reader.close()
+        return
     try:
-        return _play(reader, options, stop)
-    finally:
-        reader.close()
+        raw = read_raw_messages(bag, topics)
+    except BagError as not_mcap:
+        raise PlayInputError(f"cannot open bag {bag}: {unopened} ({not_mcap})") from unopened
+    yield BagSource(raw.types, raw.counts(), lambda: raw, raw.damage)
 
 
-def _play(reader: Reader, options: PlayOptions, stop: threading.Event) -> PlayReport:
-    available = {c.topic for c in reader.connections}
-    unknown = sorted(set(options.topics) - available)
-    if unknown:
+def _rosbags_source(reader: Reader, topics: Collection[str]) -> BagSource:
+    played = [c for c in reader.connections if not topics or c.topic in topics]
+    counts: Counter[str] = Counter()
+    for connection in played:
+        counts[connection.topic] += connection.msgcount
+
+    def messages() -> Iterator[tuple[str, int, bytes]]:
+        for connection, log_time_ns, raw in reader.messages(connections=played):
+            yield connection.topic, log_time_ns, raw
+
+    types: dict[str, str] = {}
+    for connection in reader.connections:
+        types.setdefault(connection.topic, connection.msgtype)
+    return BagSource(types, dict(counts), messages)
+
+
+def _check(source: BagSource, options: PlayOptions) -> None:
+    """Refuse topics the bag does not have and a loop over nothing (usage errors), and a
+    damaged bag with nothing before its damage (:class:`PlayError`)."""
+    unknown = sorted(set(options.topics) - source.types.keys())
+    available = ", ".join(sorted(source.types)) or "none"
+    if unknown and source.damage is not None:
         raise PlayInputError(
-            f"no topic {', '.join(unknown)} in the bag; it has {', '.join(sorted(available))}"
+            f"no topic {', '.join(unknown)} before the damage of the bag; topics seen before "
+            f"it: {available} (the bag is damaged: {source.damage})"
         )
-    connections = [c for c in reader.connections if not options.topics or c.topic in options.topics]
-    if options.loop and not any(c.msgcount for c in connections):  # it would spin on nothing
+    if unknown:
+        raise PlayInputError(f"no topic {', '.join(unknown)} in the bag; it has {available}")
+    if source.damage is not None and not any(source.counts.values()):
+        raise PlayError(f"nothing to play before the damage of the bag: {source.damage}")
+    if options.loop and not any(source.counts.values()):  # it would spin on nothing
         raise PlayInputError("nothing to loop: the bag has no messages on the topics to play")
+
+
+def play(
+    source: BagSource, options: PlayOptions, stop: threading.Event, warn: Callable[[str], None]
+) -> PlayReport:
+    """Play ``source`` (rclpy must be initialised) until its end, or until ``stop`` is set;
+    ``warn`` is told, before the first message, what a damaged bag leaves out."""
+    _check(source, options)
+    if source.damage is not None:
+        counted = ", ".join(f"{topic} {n}" for topic, n in source.counts.items())
+        warn(
+            f"the bag is damaged: only the {sum(source.counts.values())} messages before the "
+            f"damage are played ({counted})"
+        )
     node = rclpy.create_node("prsm_health_player")
     try:
         qos = QoSProfile(depth=PUBLISHER_DEPTH, reliability=QoSReliabilityPolicy.RELIABLE)
         publishers: dict[str, Any] = {}
-        for connection in connections:
-            if connection.topic not in publishers:
-                try:
-                    cls = message_class(connection.msgtype)
-                except LookupError as exc:
-                    raise PlayInputError(f"topic {connection.topic}: {exc}") from exc
-                publishers[connection.topic] = node.create_publisher(cls, connection.topic, qos)
+        for topic in source.counts:
+            try:
+                cls = message_class(source.types[topic])
+            except LookupError as exc:
+                raise PlayInputError(f"topic {topic}: {exc}") from exc
+            publishers[topic] = node.create_publisher(cls, topic, qos)
         clock = _Clock(node, options.clock_rate_hz) if options.clock else None
         if options.wait_for_subscribers_s > 0.0:
             waited = {**publishers, **({"/clock": clock.publisher} if clock else {})}
             _wait_for_subscribers(waited, options.wait_for_subscribers_s, stop)
-        report = PlayReport()
+        report = PlayReport(damage=source.damage)
         while not stop.is_set():
-            _one_pass(reader, connections, publishers, clock, options.rate, stop, report)
+            _one_pass(source.messages(), publishers, clock, options.rate, stop, report)
             report.passes += 1
             if not options.loop:
                 break
@@ -223,8 +295,7 @@ def _play(reader: Reader, options: PlayOptions, stop: threading.Event) -> PlayRe
 
 
 def _one_pass(
-    reader: Reader,
-    connections: Sequence[Any],
+    messages: Iterable[tuple[str, int, bytes]],
     publishers: dict[str, Any],
     clock: _Clock | None,
     rate: float,
@@ -233,7 +304,7 @@ def _one_pass(
 ) -> None:
     start: float | None = None  # at the first message: reading the first chunk takes time
     first_ns = 0
-    for connection, log_time_ns, raw in reader.messages(connections=connections):
+    for topic, log_time_ns, raw in messages:
         if start is None:
             start, first_ns = time.monotonic(), log_time_ns
         target = start + (log_time_ns - first_ns) / NS_PER_S / rate
@@ -246,7 +317,7 @@ def _one_pass(
             delay = target - time.monotonic()
         if clock is not None:
             clock.tick(log_time_ns)
-        publishers[connection.topic].publish(bytes(raw))
-        report.published[connection.topic] += 1
+        publishers[topic].publish(bytes(raw))
+        report.published[topic] += 1
         if stop.is_set():
             return

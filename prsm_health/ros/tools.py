@@ -42,7 +42,12 @@ def _count(text: str) -> int:
 def add_ros_commands(commands: argparse._SubParsersAction[Parser]) -> None:
     """Add ``play``, ``monitor`` and ``demo`` to the ``prsm-health`` subparsers."""
     play = commands.add_parser("play", help="publish a bag's messages over DDS with their timing")
-    play.add_argument("bag", type=Path, help="rosbag2 directory (MCAP or SQLite)")
+    play.add_argument(
+        "bag",
+        type=Path,
+        help="rosbag2 directory (MCAP or SQLite) or .mcap file; a damaged MCAP bag is played "
+        "up to the damage",
+    )
     play.add_argument("--rate", type=_positive, default=1.0, help="speed factor (default 1)")
     play.add_argument("--clock", action="store_true", help="publish /clock (bag log time)")
     play.add_argument("--clock-rate", type=_positive, default=100.0, metavar="HZ")
@@ -79,8 +84,14 @@ def add_ros_commands(commands: argparse._SubParsersAction[Parser]) -> None:
     demo.set_defaults(handler=_run_demo)
 
 
+def _warn_play(text: str) -> None:
+    print(f"prsm-health play: warning: {text}", file=sys.stderr)
+
+
 def _run_play(args: argparse.Namespace) -> int:
-    from prsm_health.ros.player import ACK_TIMEOUT_S, PlayError, PlayOptions, play
+    """Play the bag; 1 if the play failed, a reliable subscriber missed messages, or the bag
+    is damaged (its messages before the damage are played, the damage printed at the end)."""
+    from prsm_health.ros.player import ACK_TIMEOUT_S, PlayError, PlayOptions, open_bag, play
     from prsm_health.ros.runtime import ros_session
 
     try:
@@ -92,8 +103,8 @@ def _run_play(args: argparse.Namespace) -> int:
             loop=args.loop,
             wait_for_subscribers_s=args.wait_for_subscribers,
         )
-        with ros_session() as stop:
-            report = play(args.bag, options, stop)
+        with ros_session() as stop, open_bag(args.bag, options.topics) as source:
+            report = play(source, options, stop, _warn_play)
     except PlayError as exc:
         print(f"prsm-health play: error: {exc}", file=sys.stderr)
         return 1
@@ -109,8 +120,9 @@ def _run_play(args: argparse.Namespace) -> int:
             f" {ACK_TIMEOUT_S:g} s: {', '.join(report.unacknowledged)} (messages may be lost)",
             file=sys.stderr,
         )
-        return 1
-    return 0
+    if report.damage is not None:
+        print(f"prsm-health play: error: played up to the damage: {report.damage}", file=sys.stderr)
+    return 1 if report.unacknowledged or report.damage is not None else 0
 
 
 def _run_monitor(args: argparse.Namespace) -> int:

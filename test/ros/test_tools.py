@@ -16,9 +16,11 @@ import numpy as np
 import pytest
 import rclpy
 from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus
-from prsm_health_msgs.msg import HealthEstimate, MotorState
+from mcap.reader import NonSeekingReader
+from prsm_health_msgs.msg import GroundTruth, HealthEstimate, MotorState
 from rclpy.executors import SingleThreadedExecutor
 from rclpy.qos import QoSProfile, QoSReliabilityPolicy
+from rosgraph_msgs.msg import Clock
 
 from prsm_health.bags.writer import BagWriter, write_joint_states, write_motor_states
 from prsm_health.outputs import INPUT_HEALTH, Level
@@ -26,6 +28,7 @@ from prsm_health.ros.messages import stamp_seconds
 from prsm_health.ros.monitor import Monitor, MonitorOptions, diagnostics_record, table
 from prsm_health.ros.player import ACK_TIMEOUT_S
 from prsm_health.signals import MotorSamples
+from test.conftest import REPO
 from test.ros.data import short_jam_scene, simulated_bag, synthetic_run, write_bag
 from test.ros.harness import Listener, NodeProcess, start_player, stop_process
 
@@ -49,13 +52,6 @@ def test_play_refuses_what_it_cannot_play(tmp_path: Path) -> None:
     assert missing.returncode == 2
     assert f"cannot open bag {tmp_path / 'none'}" in missing.stderr
     bag = write_bag(tmp_path / "bag", synthetic_run(0.1))
-    cut = tmp_path / "cut"
-    shutil.copytree(bag, cut)
-    mcap = next(cut.glob("*.mcap"))
-    mcap.write_bytes(mcap.read_bytes()[:-100])
-    damaged = cli("play", str(cut))
-    assert damaged.returncode == 2
-    assert "read up to the damage by prsm-health replay" in damaged.stderr
     unknown = cli("play", str(bag), "--topics", "/nope")
     assert unknown.returncode == 2
     assert "no topic /nope in the bag; it has /motor_state" in unknown.stderr
@@ -146,6 +142,111 @@ def test_play_names_the_topics_without_a_subscriber(ros: None, tmp_path: Path) -
         " pass --topics /motor_state to play only the subscribed topics;"
         " drop --clock if no node uses sim time"
     )
+
+
+def _cut_copy(bag: Path, tmp_path: Path, fraction: float) -> tuple[Path, Path, int]:
+    """A copy of the bag directory with its .mcap file cut at ``fraction`` of its length;
+    returns the copy, its .mcap file and the length cut to."""
+    copy = tmp_path / f"cut-{bag.name}"
+    shutil.copytree(bag, copy)
+    mcap = next(copy.glob("*.mcap"))
+    data = mcap.read_bytes()
+    cut = int(len(data) * fraction)
+    mcap.write_bytes(data[:cut])
+    return copy, mcap, cut
+
+
+def _complete_messages(mcap: Path) -> list[tuple[str, int, bytes]]:
+    """(topic, log time, payload) of the messages the mcap library streams out of the file
+    before it fails (those of the chunks complete before the damage), in file order."""
+    found: list[tuple[str, int, bytes]] = []
+    with mcap.open("rb") as stream:
+        try:
+            for _, channel, message in NonSeekingReader(stream).iter_messages(log_time_order=False):
+                found.append((channel.topic, message.log_time, message.data))
+        except Exception:  # noqa: S110 - the damage ends the stream; what came before counts
+            pass
+    return found
+
+
+def test_play_plays_a_damaged_bag_up_to_the_damage(ros: None, tmp_path: Path) -> None:
+    """A bundled scene bag cut a quarter into its .mcap (inside its second chunk, as a power
+    loss leaves a recording): rosbags cannot open it, so play refused it with exit code 2. It
+    plays the messages of the complete chunks before the damage with their timing and /clock,
+    then names the damage and exits with 1."""
+    bag, mcap, cut = _cut_copy(REPO / "bags" / "sudden-jam", tmp_path, 0.25)
+    expected = _complete_messages(mcap)
+    topics = ("/motor_state", "/truth/state")
+    in_log_time_order = {
+        topic: [data for t, _, data in sorted(expected, key=lambda m: m[1]) if t == topic]
+        for topic in topics
+    }
+    counts = {topic: len(payloads) for topic, payloads in in_log_time_order.items()}
+    assert 10_000 < len(expected) < 20_000 and all(counts.values())
+    listener = Listener()
+    received: dict[str, list[bytes]] = {topic: [] for topic in topics}
+    clock_ns: list[int] = []
+    qos = QoSProfile(depth=50_000, reliability=QoSReliabilityPolicy.RELIABLE)
+    for topic, msgtype in ((topics[0], MotorState), (topics[1], GroundTruth)):
+        listener.node.create_subscription(msgtype, topic, received[topic].append, qos, raw=True)
+    listener.node.create_subscription(
+        Clock, "/clock", lambda m: clock_ns.append(m.clock.sec * 10**9 + m.clock.nanosec), qos
+    )
+    args = ("--rate", "10", "--clock", "--wait-for-subscribers", "20")
+    command = [sys.executable, "-m", "prsm_health", "play", str(bag), *args]
+    player = subprocess.Popen(command, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+    try:
+        listener.wait_for(lambda: player.poll() is not None, 60.0, "the player")
+        out, err = player.communicate(timeout=20)
+        assert player.returncode == 1, out + err
+        listener.wait_for(
+            lambda: all(len(received[t]) >= n for t, n in counts.items()), 10.0, "every message"
+        )
+    finally:
+        stop_process(player)
+        listener.close()
+    played = f"/motor_state {counts[topics[0]]}, /truth/state {counts[topics[1]]}"
+    assert f"play done: {played} published in 1 pass(es)" in out
+    warning, error = err.splitlines()
+    assert warning == (
+        f"prsm-health play: warning: the bag is damaged: only the {len(expected)} messages"
+        f" before the damage are played ({played})"
+    )
+    assert error.startswith(
+        f"prsm-health play: error: played up to the damage: {mcap}: damaged at byte "
+    )
+    assert f"file cut at byte {cut}," in error
+    assert received == in_log_time_order
+    first_ns, last_ns = min(m[1] for m in expected), max(m[1] for m in expected)
+    assert clock_ns[0] == first_ns and first_ns < clock_ns[-1] <= last_ns
+    assert np.all(np.diff(clock_ns) >= 10**7)  # 100 Hz of bag time, never backwards
+
+
+def test_play_refuses_what_a_damaged_bag_does_not_have(tmp_path: Path) -> None:
+    """Nothing before the damage: an error naming it, exit 1, nothing published; a topic not
+    seen before the damage: the usage error, naming the damage; a bag cut after its data
+    section: every message played, then the damage and exit 1."""
+    bag = write_bag(tmp_path / "bag", synthetic_run(0.1))
+    empty, mcap, _ = _cut_copy(bag, tmp_path / "empty", 0.5)  # inside its only chunk
+    nothing = cli("play", str(empty))
+    assert (nothing.returncode, nothing.stdout) == (1, "")
+    assert nothing.stderr.startswith(
+        f"prsm-health play: error: nothing to play before the damage of the bag: {mcap}:"
+        " damaged at byte "
+    )
+    looped = cli("play", str(empty), "--loop")
+    assert looped.returncode == 1 and "nothing to play before the damage" in looped.stderr
+    summary, mcap, _ = _cut_copy(bag, tmp_path / "summary", 0.9)
+    unknown = cli("play", str(summary), "--topics", "/nope")
+    assert unknown.returncode == 2
+    assert unknown.stderr.startswith(
+        "prsm-health: error: no topic /nope before the damage of the bag; topics seen before"
+        f" it: /motor_state (the bag is damaged: {mcap}: damaged at byte "
+    )
+    whole = cli("play", str(summary), "--rate", "5")
+    assert whole.returncode == 1
+    assert "play done: /motor_state 100 published in 1 pass(es)" in whole.stdout
+    assert "every message in it was read" in whole.stderr.splitlines()[-1]
 
 
 def test_play_publishes_every_message(tmp_path: Path) -> None:
