@@ -5,8 +5,9 @@ Everything on loopback (:func:`~prsm_health.ros.runtime.loopback_env`; the domai
 in its own process with a fresh state file in the work directory (its log next to it), the
 player in another; this process shows the monitor's table while the bag plays, then prints a
 summary of the last estimate (load, jam count and probabilities, precision loss) beside the
-bag's ground truth, and the diagnostics at the end of the bag (a second later they would all
-be STALE).
+bag's ground truth, and the first diagnostics the node publishes after the bag's end: they
+count every sample, and come before the node's stale timeout (1 s; they are published at
+:data:`DIAGNOSTICS_RATE_HZ`), after which they would all be STALE.
 
 The node's estimator parameters are the bundled config/default.yaml with the ``actuator``
 section of the bag's scene when the bag is named after a bundled scene: the scenes accelerate
@@ -42,7 +43,8 @@ from prsm_health.yamlio import load_yaml_mapping
 DEMO_DOMAIN_ID = 42
 #: What the demo plays of the bag (the node's default input).
 INPUT_TOPIC = "/motor_state"
-#: The node's diagnostics rate in the demo [Hz] (the table refreshes at this rate).
+#: The node's diagnostics rate in the demo [Hz] (the table refreshes at this rate): faster than
+#: one per stale_timeout_s, so that the first after the bag's end is not yet STALE.
 DIAGNOSTICS_RATE_HZ = 2.0
 #: After the player ends, wait until no estimate came for this long [s].
 QUIET_S = 1.0
@@ -204,7 +206,15 @@ def run_demo(bag: Path, *, rate: float, timeout_s: float, workdir: Path) -> int:
                 "the end of the bag",
                 stop,
             )
-            verdicts = monitor.latest_diagnostics  # at the end of the bag, before STALE
+            at_end = monitor.latest_diagnostics
+            _spin_until(
+                monitor,
+                lambda: monitor.latest_diagnostics is not at_end,
+                deadline,
+                "the diagnostics after the bag",
+                stop,
+            )
+            verdicts = monitor.latest_diagnostics  # every sample counted, not yet STALE
             count, changed = monitor.health_received, time.monotonic()
             while time.monotonic() - changed < QUIET_S and not stop.is_set():
                 if time.monotonic() > deadline:

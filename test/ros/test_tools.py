@@ -528,5 +528,11 @@ def test_demo_runs_node_player_and_monitor(tmp_path: Path) -> None:
     assert "truth           " in summary and "1 jammed" in summary  # from /truth/state
     assert "axial load" in summary and "precision loss" in summary
     assert "ERROR prsm_health: jammed rollers: 1 jammed roller" in summary
+    # The diagnostics shown are the first after the bag's end: they count every sample the
+    # estimate counts (those at the player's end missed the last ones), and are not STALE.
+    accepted = re.search(r"\((\d+) samples accepted", summary)
+    received = re.search(r"input health: .*, 0 rejected of (\d+) received", summary)
+    assert accepted and received and received[1] == accepted[1], summary
+    assert "STALE" not in summary
     assert (tmp_path / "demo" / "node.log").read_text().count("configured") == 1
     assert (tmp_path / "demo" / "state.json").is_file()  # saved at the node's shutdown
