@@ -41,7 +41,7 @@ from rclpy.qos import QoSProfile, QoSReliabilityPolicy
 from rosbags.rosbag2 import Reader, ReaderError
 from rosgraph_msgs.msg import Clock
 
-from prsm_health.bags.errors import BagError
+from prsm_health.bags.errors import BagDamagedError, BagError
 from prsm_health.bags.raw import read_raw_messages
 from prsm_health.ros.messages import time_msg
 from prsm_health.ros.runtime import message_class
@@ -206,7 +206,7 @@ def open_bag(bag: Path, topics: Collection[str]) -> Iterator[BagSource]:
         unopened = exc
     else:
         try:
-            yield _rosbags_source(reader, topics)
+            yield _rosbags_source(reader, topics, bag)
         finally:
             reader.close()
         return
@@ -217,15 +217,24 @@ def open_bag(bag: Path, topics: Collection[str]) -> Iterator[BagSource]:
     yield BagSource(raw.types, raw.counts(), lambda: raw, raw.damage)
 
 
-def _rosbags_source(reader: Reader, topics: Collection[str]) -> BagSource:
+def _rosbags_source(reader: Reader, topics: Collection[str], bag: Path) -> BagSource:
+    """The bag as rosbags opened it. A bag whose summary is intact opens even if a chunk is
+    corrupt; rosbags fails when it reaches that chunk, and the pass ends there with a
+    :class:`~prsm_health.bags.errors.BagDamagedError` (the messages before it were played)."""
     played = [c for c in reader.connections if not topics or c.topic in topics]
     counts: Counter[str] = Counter()
     for connection in played:
         counts[connection.topic] += connection.msgcount
 
     def messages() -> Iterator[tuple[str, int, bytes]]:
-        for connection, log_time_ns, raw in reader.messages(connections=played):
-            yield connection.topic, log_time_ns, raw
+        read = 0
+        try:
+            for connection, log_time_ns, raw in reader.messages(connections=played):
+                read += 1
+                yield connection.topic, log_time_ns, raw
+        except Exception as exc:  # rosbags raises assorted errors on a corrupt chunk
+            reason = f"unreadable after {read} messages: {type(exc).__name__}: {exc}"
+            raise BagDamagedError(bag, reason) from exc
 
     types: dict[str, str] = {}
     for connection in reader.connections:
@@ -279,9 +288,12 @@ def play(
             _wait_for_subscribers(waited, options.wait_for_subscribers_s, stop)
         report = PlayReport(damage=source.damage)
         while not stop.is_set():
-            _one_pass(source.messages(), publishers, clock, options.rate, stop, report)
+            try:
+                _one_pass(source.messages(), publishers, clock, options.rate, stop, report)
+            except BagDamagedError as damage:  # found while reading: the pass ends there
+                report.damage = damage
             report.passes += 1
-            if not options.loop:
+            if not options.loop or report.damage is not None:
                 break
         report.interrupted = stop.is_set()
         for topic, publisher in publishers.items():

@@ -16,7 +16,7 @@ import numpy as np
 import pytest
 import rclpy
 from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus
-from mcap.reader import NonSeekingReader
+from mcap.reader import NonSeekingReader, make_reader
 from prsm_health_msgs.msg import GroundTruth, HealthEstimate, MotorState
 from rclpy.executors import SingleThreadedExecutor
 from rclpy.qos import QoSProfile, QoSReliabilityPolicy
@@ -220,6 +220,32 @@ def test_play_plays_a_damaged_bag_up_to_the_damage(ros: None, tmp_path: Path) ->
     first_ns, last_ns = min(m[1] for m in expected), max(m[1] for m in expected)
     assert clock_ns[0] == first_ns and first_ns < clock_ns[-1] <= last_ns
     assert np.all(np.diff(clock_ns) >= 10**7)  # 100 Hz of bag time, never backwards
+
+
+def test_play_ends_at_a_corrupt_chunk_of_a_bag_whose_summary_is_intact(tmp_path: Path) -> None:
+    """rosbags opens a bag whose summary is intact even if a chunk in the middle is corrupt,
+    and fails when it reaches that chunk: play published the messages before it and then died
+    with a traceback. The pass now ends there: the damage in one line, exit code 1."""
+    copy = tmp_path / "corrupt"
+    shutil.copytree(REPO / "bags" / "sudden-jam", copy)
+    mcap = next(copy.glob("*.mcap"))
+    with mcap.open("rb") as stream:
+        chunk = make_reader(stream).get_summary().chunk_indexes[3]
+    data = bytearray(mcap.read_bytes())
+    middle = chunk.chunk_start_offset + chunk.chunk_length // 2
+    data[middle : middle + 4096] = bytes(4096)  # zeros: the zstd frame no longer decodes
+    mcap.write_bytes(bytes(data))
+    played = cli("play", str(copy), "--rate", "1e6")
+    assert played.returncode == 1, played.stdout + played.stderr
+    (error,) = played.stderr.splitlines()
+    found = re.fullmatch(
+        rf"prsm-health play: error: played up to the damage: {re.escape(str(copy))}: "
+        r"unreadable after (\d+) messages: \w+: .+",
+        error,
+    )
+    assert found, error
+    counts = re.search(r"/motor_state (\d+), /truth/state (\d+) published in 1 pass", played.stdout)
+    assert counts and int(counts[1]) + int(counts[2]) == int(found[1]) > 0
 
 
 def test_play_refuses_what_a_damaged_bag_does_not_have(tmp_path: Path) -> None:
