@@ -49,6 +49,13 @@ def _friction(actuator: Actuator, name: str, factor: float) -> Actuator:
     return dataclasses.replace(actuator, preset=dataclasses.replace(preset, friction=friction))
 
 
+def _efficiency(actuator: Actuator, change: float) -> Actuator:
+    """``actuator`` with the gearbox efficiency changed by ``change`` (absolute)."""
+    drive = actuator.drive_train
+    changed = dataclasses.replace(drive, gear_efficiency=drive.gear_efficiency + change)
+    return dataclasses.replace(actuator, drive_train=changed)
+
+
 def _inertia(actuator: Actuator, factor: float) -> Actuator:
     return _drive(_drive(actuator, "motor_inertia_kg_m2", factor), "screw_inertia_kg_m2", factor)
 
@@ -57,13 +64,13 @@ VARIANTS: dict[str, Callable[[Actuator], Actuator]] = {
     "exact": lambda a: a,
     "torque constant +5 %": lambda a: _drive(a, "torque_constant_nm_per_a", 1.05),
     "torque constant -5 %": lambda a: _drive(a, "torque_constant_nm_per_a", 0.95),
-    "gear efficiency 0.93 (0.95)": lambda a: _drive(a, "gear_efficiency", 0.93 / 0.95),
-    "gear efficiency 0.97 (0.95)": lambda a: _drive(a, "gear_efficiency", 0.97 / 0.95),
+    "gear efficiency -0.02": lambda a: _efficiency(a, -0.02),
+    "gear efficiency +0.02": lambda a: _efficiency(a, +0.02),
     "sliding friction x1.3": lambda a: _friction(a, "sliding_friction_coefficient", 1.3),
     "sliding friction x0.7": lambda a: _friction(a, "sliding_friction_coefficient", 0.7),
     "hysteresis loss x1.5": lambda a: _friction(a, "hysteresis_loss_coefficient", 1.5),
-    "viscosity x3": lambda a: _friction(a, "lubricant_viscosity_pa_s", 3.0),
-    "viscosity /3": lambda a: _friction(a, "lubricant_viscosity_pa_s", 1.0 / 3.0),
+    "lubricant viscosity x3": lambda a: _friction(a, "lubricant_viscosity_pa_s", 3.0),
+    "lubricant viscosity /3": lambda a: _friction(a, "lubricant_viscosity_pa_s", 1.0 / 3.0),
     "inertia x1.5": lambda a: _inertia(a, 1.5),
 }
 

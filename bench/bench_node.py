@@ -10,9 +10,10 @@ Reports: messages dropped (published minus what the node's input-health status s
 received, after the run; floor 0 at 1 kHz on 2 cores); the median and p99 latency from the
 header stamp of the last sample of a block to the arrival of that block's HealthEstimate here
 (both on the wall clock of this machine); the node's CPU use in cores; and its resident
-memory (VmRSS), sampled once a second while the samples flow: at the start, at the end, and
-its growth per hour, the slope of a straight line through the second half of the run (the
-first half holds the warm-up: tables built, filters allocated), which a leak keeps above zero.
+memory (VmRSS), sampled once a second while the samples flow: as they start (the node up and
+active), at the end, and its growth per hour, the slope of a straight line through the second
+half of the run (the first half holds the warm-up: filters allocated, buffers grown), which a
+leak keeps above zero (null for a run shorter than about 8 s).
 
     .venv/bin/python bench/bench_node.py [--seconds 20] [--rate-hz 1000] [--batch-period-s S]
 """
@@ -91,9 +92,17 @@ def resident_mib(pid: int) -> float:
     raise RuntimeError(f"no VmRSS for process {pid}")
 
 
-def growth_mib_per_h(samples: list[tuple[float, float]]) -> float:
-    """Slope of a least-squares line through the second half of (time [s], MiB) [MiB/h]."""
-    times, mib = np.asarray(samples[len(samples) // 2 :]).T
+#: Fewest readings in the second half for a growth figure (a shorter run gives None).
+MIN_GROWTH_READINGS = 4
+
+
+def growth_mib_per_h(samples: list[tuple[float, float]]) -> float | None:
+    """Slope of a least-squares line through the second half of (time [s], MiB) [MiB/h];
+    None with fewer than MIN_GROWTH_READINGS readings there."""
+    half = samples[len(samples) // 2 :]
+    if len(half) < MIN_GROWTH_READINGS:
+        return None
+    times, mib = np.asarray(half).T
     return float(np.polyfit(times, mib, 1)[0] * 3600.0)
 
 
@@ -179,6 +188,7 @@ def main() -> None:
             rclpy.shutdown()
         stamps = np.load(stamps_file)
         lat = latencies(stamps, received) * 1e3
+        growth = growth_mib_per_h(memory)
         report = {
             "published": len(stamps),
             "received_by_node": int(inputs.get("received", "-1")),
@@ -190,7 +200,7 @@ def main() -> None:
             "node_cpu_cores": round(cpu, 2),
             "node_rss_start_mib": round(memory[0][1], 1),
             "node_rss_end_mib": round(memory[-1][1], 1),
-            "node_rss_growth_mib_per_h": round(growth_mib_per_h(memory), 2),
+            "node_rss_growth_mib_per_h": None if growth is None else round(growth, 2),
         }
         print(json.dumps(report))
 

@@ -86,7 +86,7 @@ class HealthEstimator:
         self._blocker = SampleBlocker(params)
         self._model = TorqueModel(params)
         self._bank = JamHypotheses(params, self._model)
-        self._torque_scale_error = params.noise.torque_scale_error_rel
+        self._torque_scale_error_rel = params.noise.torque_scale_error_rel
         self._degradation = DegradationIntegrator(
             wear_coefficient_sigma_ln=params.model.wear_coefficient_sigma_ln,
             radial_relative_sensitivity=_radial_sensitivity(params),
@@ -414,7 +414,7 @@ class HealthEstimator:
         """A hypothesis' load variance [N^2]: its filter's, plus the torque scale's fixed
         error (``noise.torque_scale_error_rel``) times its load, squared."""
         load = float(h.filter.x[LOAD])
-        return float(h.filter.P[LOAD, LOAD]) + (self._torque_scale_error * load) ** 2
+        return float(h.filter.P[LOAD, LOAD]) + (self._torque_scale_error_rel * load) ** 2
 
     def _standing_fields(self) -> dict[str, Any]:
         """The fields of an estimate that the estimator's state holds between blocks: jam
