@@ -48,6 +48,8 @@ INPUT_TOPIC = "/motor_state"
 DIAGNOSTICS_RATE_HZ = 2.0
 #: After the player ends, wait until no estimate came for this long [s].
 QUIET_S = 1.0
+#: The longest wait for the node's next diagnostics after the bag [s]: six of their periods.
+NEXT_DIAGNOSTICS_S = 6.0 / DIAGNOSTICS_RATE_HZ
 STOP_TIMEOUT_S = 10.0
 
 
@@ -209,11 +211,13 @@ def run_demo(bag: Path, *, rate: float, timeout_s: float, workdir: Path) -> int:
             at_end = monitor.latest_diagnostics
             _spin_until(
                 monitor,
-                lambda: monitor.latest_diagnostics is not at_end,
-                deadline,
-                "the diagnostics after the bag",
+                lambda: monitor.latest_diagnostics is not at_end or node.poll() is not None,
+                min(deadline, time.monotonic() + NEXT_DIAGNOSTICS_S),
+                "the node's diagnostics after the bag",
                 stop,
             )
+            if node.poll() is not None:
+                raise DemoError(f"the node ended with code {node.returncode}; see {log.name}")
             verdicts = monitor.latest_diagnostics  # every sample counted, not yet STALE
             count, changed = monitor.health_received, time.monotonic()
             while time.monotonic() - changed < QUIET_S and not stop.is_set():
