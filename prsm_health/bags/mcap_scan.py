@@ -425,7 +425,7 @@ class BagScanner:
         self, found: _File, segment: _Segment, topic: str
     ) -> tuple[str, UInt8Array, Int64Array, Int64Array, UInt64Array] | None:
         """Pass 2 over one segment: the messages of ``topic`` in it, sorted by log time."""
-        known = found.channels | (found.summary_channels or {})
+        known = (found.summary_channels or {}) | found.channels  # the data section's win
         wanted = {cid for cid, c in known.items() if self._wanted(found, topic, c)}
         data = _decompress(found, segment)
         times: list[int] = []

@@ -37,8 +37,9 @@ from typing import Any
 
 import rclpy
 from rclpy.duration import Duration
+from rclpy.exceptions import InvalidTopicNameException
 from rclpy.qos import QoSProfile, QoSReliabilityPolicy
-from rosbags.rosbag2 import Reader, ReaderError
+from rosbags.rosbag2 import Reader
 from rosgraph_msgs.msg import Clock
 
 from prsm_health.bags.errors import BagDamagedError, BagError
@@ -179,16 +180,19 @@ def _has_reliable_subscriber(node: Any, topic: str) -> bool:
 class BagSource:
     """A bag as the player plays it.
 
-    ``types``: topic -> message type of every topic of the bag (of a damaged bag: met before
-    the damage). ``counts``: the messages of each topic to play. ``messages``: a new pass over
-    those, in log-time order, as ``(topic, log time [ns], CDR bytes)``. ``damage``: what ended
-    the reading of a damaged bag (None: the bag is intact).
+    ``types``: topic -> message type of every topic of the bag (of a damaged bag: those its
+    metadata.yaml declares and those met before the damage). ``counts``: the messages of each
+    topic to play. ``new_pass()``: a new pass over those, in log-time order, as ``(topic, log
+    time [ns], CDR bytes)``. ``damage``: what ended the reading of a damaged bag (None: the
+    bag is intact). ``rosbags_error``: why rosbags could not open a bag that was read without
+    it (None: rosbags opened it).
     """
 
     types: dict[str, str]
     counts: dict[str, int]
-    messages: Callable[[], Iterable[tuple[str, int, bytes]]]
+    new_pass: Callable[[], Iterable[tuple[str, int, bytes]]]
     damage: BagError | None = None
+    rosbags_error: str | None = None
 
 
 @contextmanager
@@ -202,8 +206,10 @@ def open_bag(bag: Path, topics: Collection[str]) -> Iterator[BagSource]:
     try:
         reader = Reader(bag)
         reader.open()
-    except (ReaderError, OSError) as exc:
-        unopened = exc
+    # rosbags raises assorted errors on a damaged summary (UnicodeDecodeError, struct.error,
+    # OverflowError, MemoryError besides its ReaderError): the raw reader judges the bag then.
+    except Exception as exc:
+        rosbags_error = exc
     else:
         try:
             yield _rosbags_source(reader, topics, bag)
@@ -212,9 +218,17 @@ def open_bag(bag: Path, topics: Collection[str]) -> Iterator[BagSource]:
         return
     try:
         raw = read_raw_messages(bag, topics)
-    except BagError as not_mcap:
-        raise PlayInputError(f"cannot open bag {bag}: {unopened} ({not_mcap})") from unopened
-    yield BagSource(raw.types, raw.counts(), lambda: raw, raw.damage)
+    except BagError as unreadable:
+        raise PlayInputError(
+            f"cannot open bag {bag}: {_one_line(rosbags_error)}; "
+            f"nor as a damaged MCAP bag: {_one_line(unreadable)}"
+        ) from rosbags_error
+    yield BagSource(raw.types, raw.counts(), lambda: raw, raw.damage, _one_line(rosbags_error))
+
+
+def _one_line(error: BaseException) -> str:
+    """An error's text on one line (a YAML parser's spans several)."""
+    return " ".join(str(error).split())
 
 
 def _rosbags_source(reader: Reader, topics: Collection[str], bag: Path) -> BagSource:
@@ -249,8 +263,8 @@ def _check(source: BagSource, options: PlayOptions) -> None:
     available = ", ".join(sorted(source.types)) or "none"
     if unknown and source.damage is not None:
         raise PlayInputError(
-            f"no topic {', '.join(unknown)} before the damage of the bag; topics seen before "
-            f"it: {available} (the bag is damaged: {source.damage})"
+            f"no topic {', '.join(unknown)} in the bag's metadata or before its damage; "
+            f"topics known: {available} (the bag is damaged: {source.damage})"
         )
     if unknown:
         raise PlayInputError(f"no topic {', '.join(unknown)} in the bag; it has {available}")
@@ -266,22 +280,27 @@ def play(
     """Play ``source`` (rclpy must be initialised) until its end, or until ``stop`` is set;
     ``warn`` is told, before the first message, what a damaged bag leaves out."""
     _check(source, options)
+    if source.damage is None and source.rosbags_error is not None:
+        warn(
+            f"rosbags cannot open the bag ({source.rosbags_error}); read with prsm_health's "
+            "own MCAP reader, which found every message intact"
+        )
     if source.damage is not None:
         counted = ", ".join(f"{topic} {n}" for topic, n in source.counts.items())
         warn(
-            f"the bag is damaged: only the {sum(source.counts.values())} messages before the "
+            f"the bag is damaged: the {sum(source.counts.values())} messages before the "
             f"damage are played ({counted})"
         )
     node = rclpy.create_node("prsm_health_player")
     try:
         qos = QoSProfile(depth=PUBLISHER_DEPTH, reliability=QoSReliabilityPolicy.RELIABLE)
         publishers: dict[str, Any] = {}
-        for topic in source.counts:
+        for topic in (t for t, count in source.counts.items() if count):  # none for nothing
             try:
                 cls = message_class(source.types[topic])
-            except LookupError as exc:
-                raise PlayInputError(f"topic {topic}: {exc}") from exc
-            publishers[topic] = node.create_publisher(cls, topic, qos)
+                publishers[topic] = node.create_publisher(cls, topic, qos)
+            except (LookupError, InvalidTopicNameException) as exc:
+                raise PlayInputError(f"topic {topic!r}: {_one_line(exc)}") from exc
         clock = _Clock(node, options.clock_rate_hz) if options.clock else None
         if options.wait_for_subscribers_s > 0.0:
             waited = {**publishers, **({"/clock": clock.publisher} if clock else {})}
@@ -289,7 +308,7 @@ def play(
         report = PlayReport(damage=source.damage)
         while not stop.is_set():
             try:
-                _one_pass(source.messages(), publishers, clock, options.rate, stop, report)
+                _one_pass(source.new_pass(), publishers, clock, options.rate, stop, report)
             except BagDamagedError as damage:  # found while reading: the pass ends there
                 report.damage = damage
             report.passes += 1

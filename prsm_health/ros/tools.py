@@ -120,9 +120,10 @@ def _run_play(args: argparse.Namespace) -> int:
             f" {ACK_TIMEOUT_S:g} s: {', '.join(report.unacknowledged)} (messages may be lost)",
             file=sys.stderr,
         )
-    if report.damage is not None:
+    damaged = report.damage is not None and not report.interrupted  # stopped before it
+    if damaged:
         print(f"prsm-health play: error: played up to the damage: {report.damage}", file=sys.stderr)
-    return 1 if report.unacknowledged or report.damage is not None else 0
+    return 1 if report.unacknowledged or damaged else 0
 
 
 def _run_monitor(args: argparse.Namespace) -> int:

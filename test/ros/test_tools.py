@@ -209,7 +209,7 @@ def test_play_plays_a_damaged_bag_up_to_the_damage(ros: None, tmp_path: Path) ->
     assert f"play done: {played} published in 1 pass(es)" in out
     warning, error = err.splitlines()
     assert warning == (
-        f"prsm-health play: warning: the bag is damaged: only the {len(expected)} messages"
+        f"prsm-health play: warning: the bag is damaged: the {len(expected)} messages"
         f" before the damage are played ({played})"
     )
     assert error.startswith(
@@ -248,10 +248,32 @@ def test_play_ends_at_a_corrupt_chunk_of_a_bag_whose_summary_is_intact(tmp_path:
     assert counts and int(counts[1]) + int(counts[2]) == int(found[1]) > 0
 
 
+def test_play_reads_around_a_summary_rosbags_cannot_decode(tmp_path: Path) -> None:
+    """A byte of the summary's channel topic that is not UTF-8: rosbags fails to open the bag
+    (UnicodeDecodeError, which play did not catch: exit 2 with the codec's words only), while
+    every message is intact in the data section. It is played whole, with a warning that says
+    why rosbags was not used, and exits 0."""
+    bag = write_bag(tmp_path / "bag", synthetic_run(0.1))
+    mcap = next(bag.glob("*.mcap"))
+    data = bytearray(mcap.read_bytes())
+    footer = len(data) - (9 + 20 + 8)
+    summary_start = int.from_bytes(data[footer + 9 : footer + 17], "little")
+    topic = data.index(b"/motor_state", summary_start)
+    data[topic] = 0x82
+    mcap.write_bytes(bytes(data))
+    played = cli("play", str(bag), "--rate", "5")
+    assert played.returncode == 0, played.stdout + played.stderr
+    assert "play done: /motor_state 100 published in 1 pass(es)" in played.stdout
+    (warning,) = played.stderr.splitlines()
+    assert warning.startswith("prsm-health play: warning: rosbags cannot open the bag (")
+    assert warning.endswith("which found every message intact")
+
+
 def test_play_refuses_what_a_damaged_bag_does_not_have(tmp_path: Path) -> None:
-    """Nothing before the damage: an error naming it, exit 1, nothing published; a topic not
-    seen before the damage: the usage error, naming the damage; a bag cut after its data
-    section: every message played, then the damage and exit 1."""
+    """Nothing before the damage: an error naming it, exit 1, nothing published, also for a
+    topic the bag's metadata.yaml declares; a topic neither declared nor seen before the
+    damage: the usage error, naming the damage; a bag cut after its data section: every
+    message played, then the damage and exit 1, after one pass with --loop too."""
     bag = write_bag(tmp_path / "bag", synthetic_run(0.1))
     empty, mcap, _ = _cut_copy(bag, tmp_path / "empty", 0.5)  # inside its only chunk
     nothing = cli("play", str(empty))
@@ -262,17 +284,20 @@ def test_play_refuses_what_a_damaged_bag_does_not_have(tmp_path: Path) -> None:
     )
     looped = cli("play", str(empty), "--loop")
     assert looped.returncode == 1 and "nothing to play before the damage" in looped.stderr
+    declared = cli("play", str(empty), "--topics", "/motor_state")
+    assert declared.returncode == 1 and "nothing to play before the damage" in declared.stderr
     summary, mcap, _ = _cut_copy(bag, tmp_path / "summary", 0.9)
     unknown = cli("play", str(summary), "--topics", "/nope")
     assert unknown.returncode == 2
     assert unknown.stderr.startswith(
-        "prsm-health: error: no topic /nope before the damage of the bag; topics seen before"
-        f" it: /motor_state (the bag is damaged: {mcap}: damaged at byte "
+        "prsm-health: error: no topic /nope in the bag's metadata or before its damage;"
+        f" topics known: /motor_state (the bag is damaged: {mcap}: damaged at byte "
     )
-    whole = cli("play", str(summary), "--rate", "5")
-    assert whole.returncode == 1
-    assert "play done: /motor_state 100 published in 1 pass(es)" in whole.stdout
-    assert "every message in it was read" in whole.stderr.splitlines()[-1]
+    for loop in ((), ("--loop",)):
+        whole = cli("play", str(summary), "--rate", "5", *loop)
+        assert whole.returncode == 1
+        assert "play done: /motor_state 100 published in 1 pass(es)" in whole.stdout
+        assert "every message in it was read" in whole.stderr.splitlines()[-1]
 
 
 def test_play_publishes_every_message(tmp_path: Path) -> None:
