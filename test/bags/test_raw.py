@@ -7,13 +7,19 @@ from pathlib import Path
 
 import numpy as np
 import pytest
-from mcap.reader import NonSeekingReader
 
 from prsm_health.bags.errors import BagDamagedError, BagError
 from prsm_health.bags.raw import read_raw_messages
 from prsm_health.bags.typestore import GROUND_TRUTH, MOTOR_STATE
 from prsm_health.bags.writer import BagWriter, write_motor_states, write_truth
-from test.bags.samples import mcap_file, motor_samples, split_bag, truth_samples, write_bag
+from test.bags.samples import (
+    mcap_file,
+    motor_samples,
+    split_bag,
+    streamed_messages,
+    truth_samples,
+    write_bag,
+)
 
 MOTOR_COUNT = 30_000
 TRUTH_COUNT = 3_000
@@ -38,25 +44,10 @@ def intact(tmp_path_factory: pytest.TempPathFactory) -> Path:
     return bag
 
 
-def _streamed(path: Path) -> list[tuple[int, int, Message]]:
-    """(log time, channel id, message) of what the mcap library streams out of the file
-    before any damage, in file order."""
-    found = []
-    with path.open("rb") as stream:
-        try:
-            for _, channel, message in NonSeekingReader(stream).iter_messages(log_time_order=False):
-                found.append(
-                    (message.log_time, channel.id, (channel.topic, message.log_time, message.data))
-                )
-        except Exception:  # noqa: S110 - the damage ends the stream; what came before counts
-            pass
-    return found
-
-
 def _in_log_time_order(path: Path, topics: tuple[str, ...] = ()) -> list[Message]:
     """The streamed messages by log time; equal log times in the order of their channels
     (the order the topics were met), then of the file."""
-    found = sorted(_streamed(path), key=lambda m: m[:2])  # stable: file order within a tie
+    found = sorted(streamed_messages(path), key=lambda m: m[:2])  # stable: file order within a tie
     return [m for _, _, m in found if not topics or m[0] in topics]
 
 
@@ -110,8 +101,8 @@ def test_a_split_bag_is_merged_across_its_files(tmp_path: Path) -> None:
     ]
     bag = split_bag(tmp_path / "bag", parts)
     raw = read_raw_messages(bag)
-    first = [m for _, _, m in _streamed(mcap_file(parts[0]))]
-    second = [m for _, _, m in _streamed(mcap_file(parts[1]))]
+    first = [m for _, _, m in streamed_messages(mcap_file(parts[0]))]
+    second = [m for _, _, m in streamed_messages(mcap_file(parts[1]))]
     interleaved = [m for pair in zip(second, first, strict=True) for m in pair]
     assert raw.damage is None and list(raw) == interleaved
 

@@ -16,7 +16,7 @@ import numpy as np
 import pytest
 import rclpy
 from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus
-from mcap.reader import NonSeekingReader, make_reader
+from mcap.reader import make_reader
 from prsm_health_msgs.msg import GroundTruth, HealthEstimate, MotorState
 from rclpy.executors import SingleThreadedExecutor
 from rclpy.qos import QoSProfile, QoSReliabilityPolicy
@@ -28,6 +28,7 @@ from prsm_health.ros.messages import stamp_seconds
 from prsm_health.ros.monitor import Monitor, MonitorOptions, diagnostics_record, table
 from prsm_health.ros.player import ACK_TIMEOUT_S
 from prsm_health.signals import MotorSamples
+from test.bags.samples import streamed_messages
 from test.conftest import REPO
 from test.ros.data import short_jam_scene, simulated_bag, synthetic_run, write_bag
 from test.ros.harness import Listener, NodeProcess, start_player, stop_process
@@ -156,26 +157,13 @@ def _cut_copy(bag: Path, tmp_path: Path, fraction: float) -> tuple[Path, Path, i
     return copy, mcap, cut
 
 
-def _complete_messages(mcap: Path) -> list[tuple[str, int, bytes]]:
-    """(topic, log time, payload) of the messages the mcap library streams out of the file
-    before it fails (those of the chunks complete before the damage), in file order."""
-    found: list[tuple[str, int, bytes]] = []
-    with mcap.open("rb") as stream:
-        try:
-            for _, channel, message in NonSeekingReader(stream).iter_messages(log_time_order=False):
-                found.append((channel.topic, message.log_time, message.data))
-        except Exception:  # noqa: S110 - the damage ends the stream; what came before counts
-            pass
-    return found
-
-
 def test_play_plays_a_damaged_bag_up_to_the_damage(ros: None, tmp_path: Path) -> None:
     """A bundled scene bag cut a quarter into its .mcap (inside its second chunk, as a power
     loss leaves a recording): rosbags cannot open it, so play refused it with exit code 2. It
     plays the messages of the complete chunks before the damage with their timing and /clock,
     then names the damage and exits with 1."""
     bag, mcap, cut = _cut_copy(REPO / "bags" / "sudden-jam", tmp_path, 0.25)
-    expected = _complete_messages(mcap)
+    expected = [message for _, _, message in streamed_messages(mcap)]
     topics = ("/motor_state", "/truth/state")
     in_log_time_order = {
         topic: [data for t, _, data in sorted(expected, key=lambda m: m[1]) if t == topic]
