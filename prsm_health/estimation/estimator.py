@@ -21,12 +21,7 @@ import numpy as np
 
 from prsm_health.estimation.degradation import Degradation, DegradationIntegrator
 from prsm_health.estimation.estimate import EstimateEvent, HealthState
-from prsm_health.estimation.hypotheses import (
-    DIVERGED_LOAD_RATIO,
-    Hypothesis,
-    JamHypotheses,
-    StepResult,
-)
+from prsm_health.estimation.hypotheses import DIVERGED_LOAD_RATIO, JamHypotheses, StepResult
 from prsm_health.estimation.inputs import Block, InputCounters, SampleBlocker, merge_blocks
 from prsm_health.estimation.measurement import LOAD, TorqueModel
 from prsm_health.estimation.params import MIN_BLOCKS_FOR_DIVERGENCE, EstimatorParams
@@ -330,14 +325,15 @@ class HealthEstimator:
             event = EstimateEvent.DIVERGENCE_RECOVERED
         hypotheses = self._bank.hypotheses
         weights = [math.exp(h.log_prob) for h in hypotheses]
+        loads, variances = self._load_moments()
         moving = block.direction != 0
         if moving or not self.params.fidelity.skip_standstill:
             duration = min(block.duration_s, self.params.filter.max_gap_s)
-            load_std = [math.sqrt(self._load_variance(h)) for h in hypotheses]
+            load_std = [math.sqrt(v) for v in variances]
             self._degradation.add(duration, weights, step.predictions, load_std)
         else:
             self._degradation.stop()
-        self._last = self._state(block, step, weights, event)
+        self._last = self._state(block, step, weights, loads, variances, event)
         return self._last
 
     def _load_transition(self, block: Block) -> bool:
@@ -386,14 +382,15 @@ class HealthEstimator:
         block: Block,
         step: StepResult,
         weights: list[float],
+        loads: list[float],
+        variances: list[float],
         event: EstimateEvent,
     ) -> HealthState:
-        hypotheses = self._bank.hypotheses
-        loads = [float(h.filter.x[LOAD]) for h in hypotheses]
+        """The estimate of ``block``: the hypotheses' loads and load variances
+        (:meth:`_load_moments`) mixed with their ``weights``."""
         load = sum(w * f for w, f in zip(weights, loads, strict=True))
         load_var = sum(
-            w * (self._load_variance(h) + (f - load) ** 2)
-            for w, f, h in zip(weights, loads, hypotheses, strict=True)
+            w * (v + (f - load) ** 2) for w, f, v in zip(weights, loads, variances, strict=True)
         )
         friction = sum(
             w * p.friction_torque_nm for w, p in zip(weights, step.predictions, strict=True)
@@ -410,11 +407,16 @@ class HealthEstimator:
             **self._standing_fields(),
         )
 
-    def _load_variance(self, h: Hypothesis) -> float:
-        """A hypothesis' load variance [N^2]: its filter's, plus the torque scale's fixed
-        error (``noise.torque_scale_error_rel``) times its load, squared."""
-        load = float(h.filter.x[LOAD])
-        return float(h.filter.P[LOAD, LOAD]) + (self._torque_scale_error_rel * load) ** 2
+    def _load_moments(self) -> tuple[list[float], list[float]]:
+        """Each hypothesis' load [N] and load variance [N^2]: its filter's, plus the torque
+        scale's fixed error (``noise.torque_scale_error_rel``) times its load, squared."""
+        error = self._torque_scale_error_rel
+        loads = [float(h.filter.x[LOAD]) for h in self._bank.hypotheses]
+        variances = [
+            float(h.filter.P[LOAD, LOAD]) + (error * f) ** 2
+            for h, f in zip(self._bank.hypotheses, loads, strict=True)
+        ]
+        return loads, variances
 
     def _standing_fields(self) -> dict[str, Any]:
         """The fields of an estimate that the estimator's state holds between blocks: jam
