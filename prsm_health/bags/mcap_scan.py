@@ -95,6 +95,11 @@ class _DamageError(Exception):
         return BagDamagedError(path, f"damaged at byte {self.offset}: {self.reason}")
 
 
+class _NotMcapError(_DamageError):
+    """Internal: the file does not start with the MCAP magic (reported as damage at byte 0,
+    and told apart by :meth:`BagScanner.not_mcap`)."""
+
+
 class _MismatchError(Exception):
     """Internal: a channel of the topic is not what a reader of the topic can use."""
 
@@ -235,7 +240,7 @@ def _pass1(found: _File) -> None:
     if data[: len(MAGIC)] != MAGIC:
         if size < len(MAGIC) and MAGIC.startswith(bytes(data)):
             raise _DamageError(0, f"file is {size} bytes long, cut inside the leading MCAP magic")
-        raise _DamageError(0, "not an MCAP file (no MCAP magic at the start)")
+        raise _NotMcapError(0, "not an MCAP file (no MCAP magic at the start)")
     pos = len(MAGIC)
     loose: list[tuple[int, int, int]] = []  # unchunked messages: (record start, end, log time)
     while True:
@@ -366,6 +371,11 @@ class BagScanner:
                 return None
             topics.update({c.topic: c.msgtype for c in found.summary_channels.values()})
         return topics
+
+    def not_mcap(self) -> list[Path]:
+        """The files that do not start with the MCAP magic (one cut inside the magic, or
+        empty, is a damaged MCAP file instead)."""
+        return [found.path for found in self._files if isinstance(found.damage, _NotMcapError)]
 
     def topics(self) -> dict[str, str]:
         """Topic -> message type of every channel in the segments before any damage.

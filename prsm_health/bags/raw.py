@@ -17,7 +17,7 @@ merges one topic's segments with bounded memory, using each batch's ``final_befo
 
 from __future__ import annotations
 
-from collections.abc import Collection, Iterator, Sequence
+from collections.abc import Collection, Iterator
 from contextlib import closing
 from dataclasses import dataclass
 from pathlib import Path
@@ -28,7 +28,6 @@ from numpy.typing import NDArray
 from prsm_health.bags.bagfiles import bag_files
 from prsm_health.bags.errors import BagError
 from prsm_health.bags.mcap_scan import (
-    MAGIC,
     BagScanner,
     Int64Array,
     RawBatch,
@@ -81,19 +80,6 @@ def _payload_bytes(batch: RawBatch) -> tuple[UInt8Array, Int64Array]:
     return batch.buffer[places], firsts
 
 
-def _require_mcap(paths: Sequence[Path]) -> None:
-    """BagError for a file that does not start with the MCAP magic (one cut inside the magic,
-    or empty, is a damaged MCAP file: the scanner reports it)."""
-    for path in paths:
-        try:
-            with path.open("rb") as handle:
-                head = handle.read(len(MAGIC))
-        except OSError as exc:
-            raise BagError(path, f"cannot open: {exc.strerror or exc}") from exc
-        if not MAGIC.startswith(head):
-            raise BagError(path, "not an MCAP file (no MCAP magic at the start)")
-
-
 def read_raw_messages(path: str | Path, topics: Collection[str] = ()) -> RawMessages:
     """The raw messages of ``topics`` (every topic if empty) in the bag at ``path``, all in
     memory (module docstring), up to any damage.
@@ -108,8 +94,9 @@ def read_raw_messages(path: str | Path, topics: Collection[str] = ()) -> RawMess
             or a file of it cannot be opened or does not start as an MCAP file.
     """
     files = bag_files(path)
-    _require_mcap(files.files)
     with closing(BagScanner(files.files)) as scanner:
+        if not_mcap := scanner.not_mcap():
+            raise BagError(not_mcap[0], "not an MCAP file (no MCAP magic at the start)")
         met = scanner.topics()
         known = {**(files.topics or {}), **met}
         damages = [scanner.damage]
