@@ -33,10 +33,10 @@ from prsm_health.scenes.simulator import simulate
 NOMINAL = "nominal-10min"
 
 
-def _drive(actuator: Actuator, name: str, factor: float) -> Actuator:
-    """``actuator`` with the drive-train field ``name`` multiplied by ``factor``."""
+def _drive(actuator: Actuator, name: str, change: Callable[[float], float]) -> Actuator:
+    """``actuator`` with the drive-train field ``name`` changed by ``change``."""
     drive = actuator.drive_train
-    changed = dataclasses.replace(drive, **{name: getattr(drive, name) * factor})
+    changed = dataclasses.replace(drive, **{name: change(getattr(drive, name))})
     return dataclasses.replace(actuator, drive_train=changed)
 
 
@@ -49,23 +49,18 @@ def _friction(actuator: Actuator, name: str, factor: float) -> Actuator:
     return dataclasses.replace(actuator, preset=dataclasses.replace(preset, friction=friction))
 
 
-def _efficiency(actuator: Actuator, change: float) -> Actuator:
-    """``actuator`` with the gearbox efficiency changed by ``change`` (absolute)."""
-    drive = actuator.drive_train
-    changed = dataclasses.replace(drive, gear_efficiency=drive.gear_efficiency + change)
-    return dataclasses.replace(actuator, drive_train=changed)
-
-
 def _inertia(actuator: Actuator, factor: float) -> Actuator:
-    return _drive(_drive(actuator, "motor_inertia_kg_m2", factor), "screw_inertia_kg_m2", factor)
+    """``actuator`` with the motor's and the screw's inertia multiplied by ``factor``."""
+    scaled = _drive(actuator, "motor_inertia_kg_m2", lambda j: j * factor)
+    return _drive(scaled, "screw_inertia_kg_m2", lambda j: j * factor)
 
 
 VARIANTS: dict[str, Callable[[Actuator], Actuator]] = {
     "exact": lambda a: a,
-    "torque constant +5 %": lambda a: _drive(a, "torque_constant_nm_per_a", 1.05),
-    "torque constant -5 %": lambda a: _drive(a, "torque_constant_nm_per_a", 0.95),
-    "gear efficiency -0.02": lambda a: _efficiency(a, -0.02),
-    "gear efficiency +0.02": lambda a: _efficiency(a, +0.02),
+    "torque constant +5 %": lambda a: _drive(a, "torque_constant_nm_per_a", lambda k: k * 1.05),
+    "torque constant -5 %": lambda a: _drive(a, "torque_constant_nm_per_a", lambda k: k * 0.95),
+    "gear efficiency -0.02": lambda a: _drive(a, "gear_efficiency", lambda e: e - 0.02),
+    "gear efficiency +0.02": lambda a: _drive(a, "gear_efficiency", lambda e: e + 0.02),
     "sliding friction x1.3": lambda a: _friction(a, "sliding_friction_coefficient", 1.3),
     "sliding friction x0.7": lambda a: _friction(a, "sliding_friction_coefficient", 0.7),
     "hysteresis loss x1.5": lambda a: _friction(a, "hysteresis_loss_coefficient", 1.5),
