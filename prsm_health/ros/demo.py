@@ -118,6 +118,21 @@ def _stop(process: subprocess.Popen[bytes] | None) -> None:
         process.wait()
 
 
+def _spin_while_alive(
+    monitor: Monitor,
+    node: subprocess.Popen[bytes],
+    log: IO[bytes],
+    done: Callable[[], bool],
+    deadline: float,
+    what: str,
+    stop: Event,
+) -> None:
+    """:func:`_spin_until` ``done()`` or the node's end; DemoError if the node ended."""
+    _spin_until(monitor, lambda: done() or node.poll() is not None, deadline, what, stop)
+    if node.poll() is not None:
+        raise DemoError(f"the node ended with code {node.returncode}; see {log.name}")
+
+
 def _spin_until(
     monitor: Monitor, done: Callable[[], bool], deadline: float, what: str, stop: Event
 ) -> None:
@@ -188,15 +203,15 @@ def run_demo(bag: Path, *, rate: float, timeout_s: float, workdir: Path) -> int:
             node_command += ["-p", f"diagnostics_rate_hz:={DIAGNOSTICS_RATE_HZ}"]
             node_command += ["-p", f"params_file:={params_file}"]
             node = subprocess.Popen(node_command, stdout=log, stderr=subprocess.STDOUT)  # noqa: S603
-            _spin_until(
+            _spin_while_alive(
                 monitor,
-                lambda: monitor.latest_diagnostics is not None or node.poll() is not None,
+                node,
+                log,
+                lambda: monitor.latest_diagnostics is not None,
                 deadline,
                 "the node",
                 stop,
             )
-            if node.poll() is not None:
-                raise DemoError(f"the node ended with code {node.returncode}; see {log.name}")
             play_command = [sys.executable, "-m", "prsm_health", "play", str(bag)]
             play_command += ["--topics", INPUT_TOPIC, "--rate", f"{rate:g}"]
             play_command += ["--wait-for-subscribers", "20"]
@@ -209,15 +224,15 @@ def run_demo(bag: Path, *, rate: float, timeout_s: float, workdir: Path) -> int:
                 stop,
             )
             at_end = monitor.latest_diagnostics
-            _spin_until(
+            _spin_while_alive(
                 monitor,
-                lambda: monitor.latest_diagnostics is not at_end or node.poll() is not None,
+                node,
+                log,
+                lambda: monitor.latest_diagnostics is not at_end,
                 min(deadline, time.monotonic() + NEXT_DIAGNOSTICS_S),
                 "the node's diagnostics after the bag",
                 stop,
             )
-            if node.poll() is not None:
-                raise DemoError(f"the node ended with code {node.returncode}; see {log.name}")
             verdicts = monitor.latest_diagnostics  # every sample counted, not yet STALE
             count, changed = monitor.health_received, time.monotonic()
             while time.monotonic() - changed < QUIET_S and not stop.is_set():
