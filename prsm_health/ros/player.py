@@ -29,7 +29,7 @@ import math
 import threading
 import time
 from collections import Counter
-from collections.abc import Callable, Collection, Iterable, Iterator
+from collections.abc import Callable, Collection, Iterable, Iterator, Mapping
 from contextlib import contextmanager
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -226,6 +226,11 @@ def open_bag(bag: Path, topics: Collection[str]) -> Iterator[BagSource]:
     yield BagSource(raw.types, raw.counts(), lambda: raw, raw.damage, _one_line(rosbags_error))
 
 
+def counts_text(counts: Mapping[str, int]) -> str:
+    """Messages per topic as ``/a 10, /b 2`` (topics in order), empty for none."""
+    return ", ".join(f"{topic} {n}" for topic, n in sorted(counts.items()))
+
+
 def _one_line(error: BaseException) -> str:
     """An error's text on one line (a YAML parser's spans several)."""
     return " ".join(str(error).split())
@@ -286,10 +291,9 @@ def play(
             "own MCAP reader, which found every message intact"
         )
     if source.damage is not None:
-        counted = ", ".join(f"{topic} {n}" for topic, n in source.counts.items())
         warn(
             f"the bag is damaged: the {sum(source.counts.values())} messages before the "
-            f"damage are played ({counted})"
+            f"damage are played ({counts_text(source.counts)})"
         )
     node = rclpy.create_node("prsm_health_player")
     try:

@@ -91,7 +91,14 @@ def _warn_play(text: str) -> None:
 def _run_play(args: argparse.Namespace) -> int:
     """Play the bag; 1 if the play failed, a reliable subscriber missed messages, or the bag
     is damaged (its messages before the damage are played, the damage printed at the end)."""
-    from prsm_health.ros.player import ACK_TIMEOUT_S, PlayError, PlayOptions, open_bag, play
+    from prsm_health.ros.player import (
+        ACK_TIMEOUT_S,
+        PlayError,
+        PlayOptions,
+        counts_text,
+        open_bag,
+        play,
+    )
     from prsm_health.ros.runtime import ros_session
 
     try:
@@ -108,7 +115,7 @@ def _run_play(args: argparse.Namespace) -> int:
     except PlayError as exc:
         print(f"prsm-health play: error: {exc}", file=sys.stderr)
         return 1
-    topics = ", ".join(f"{topic} {n}" for topic, n in sorted(report.published.items()))
+    topics = counts_text(report.published)
     state = "interrupted" if report.interrupted else "done"
     print(
         f"play {state}: {topics or 'nothing'} published in {report.passes} pass(es);"
