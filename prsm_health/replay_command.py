@@ -1,11 +1,11 @@
 """``prsm-health replay BAG``: the estimator over a bag, with outputs, report and metrics.
 
 Parameters: ``--params FILE`` (estimator YAML, docs/estimation.md), else the bundled
-config/default.yaml; ``--scene NAME|FILE`` takes the actuator section from a scene file, and a
-bag named after a bundled scene takes its scene's actuator unless ``--params`` is given (the
-scenes accelerate wear: the estimator must know by how much). The bag's name is its
-directory's (bags/sudden-jam, or ``.`` inside it), or for an ``.mcap`` file its stem or else
-its directory's (bags/sudden-jam/sudden-jam.mcap).
+config/default.yaml. The actuator: ``--scene NAME|FILE`` takes the actuator section of a
+scene; else a simulated bag's own (recorded in it by ``prsm-health simulate``, or for a bag
+without that record the bundled scene it is named after:
+:func:`~prsm_health.scenes.recording.bag_actuator`), also over the ``--params`` file's (the
+scenes accelerate wear: the estimator must know by how much); else the parameters file's.
 """
 
 from __future__ import annotations
@@ -30,7 +30,7 @@ from prsm_health.estimation.estimate import UM_PER_M
 from prsm_health.estimation.inputs import RejectReason
 from prsm_health.estimation.params import EstimatorParams, bundled_params_file, params_from_mapping
 from prsm_health.replay import ReplayResult, replay
-from prsm_health.scenes.scene import load_scene, scene_names
+from prsm_health.scenes.recording import bag_actuator, scene_actuator
 from prsm_health.yamlio import YamlError, load_yaml_mapping
 
 
@@ -60,30 +60,23 @@ def add_replay_command(commands: Any) -> None:
 
 
 def _params(args: argparse.Namespace) -> tuple[EstimatorParams, str]:
-    """The estimator parameters and a line saying where they came from."""
+    """The estimator parameters and a line saying where they came from (module docstring)."""
     path = args.params or bundled_params_file()
     try:
         data = load_yaml_mapping(path)
     except YamlError as exc:
         raise ValueError(f"--params: {exc}") from exc
-    scene = args.scene
-    if scene is None and args.params is None:
-        scene = bundled_scene_of(args.bag)
     try:
         params = params_from_mapping(data)
     except ValueError as exc:  # a bad value: say which file holds it
         raise ValueError(f"--params: {path}: {exc}") from exc
+    scene = scene_actuator(args.scene) if args.scene else bag_actuator(args.bag)
     if scene is None:
         return params, str(path)
-    actuator = load_scene(scene).actuator
-    return dataclasses.replace(params, actuator=actuator), f"{path}, actuator of scene {scene}"
-
-
-def bundled_scene_of(bag: Path) -> str | None:
-    """The bundled scene a bag is named after (module docstring), if any."""
-    path = bag.resolve()
-    names = [path.stem, path.parent.name] if path.suffix == ".mcap" else [path.name]
-    return next((name for name in names if name in scene_names()), None)
+    source = f"{path}, actuator of {scene.origin}"
+    if args.params is not None and not args.scene:
+        source += " instead of the file's (--scene NAME|FILE to choose another)"
+    return dataclasses.replace(params, actuator=scene.actuator), source
 
 
 def _check_outputs(args: argparse.Namespace) -> None:

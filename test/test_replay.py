@@ -22,7 +22,6 @@ from prsm_health.cli import main
 from prsm_health.estimation.estimate import EstimateEvent
 from prsm_health.estimation.params import EstimatorParams
 from prsm_health.replay import replay
-from prsm_health.replay_command import bundled_scene_of
 from prsm_health.report import _band, _load_figure, _series, plt
 from prsm_health.scenes.recording import record
 from prsm_health.scenes.scene import load_scene, scene_from_mapping
@@ -180,19 +179,6 @@ def test_cli_refuses_a_missing_bag_and_bad_params_in_one_line(
     assert main(["replay", str(tmp_path / "nope"), "--params", str(bad)]) == 2
     err = capsys.readouterr().err
     assert err.count("\n") == 1 and f"--params: {bad}: filter.block_duration_s" in err
-
-
-def test_a_bag_named_after_a_bundled_scene_takes_its_actuator(
-    monkeypatch: pytest.MonkeyPatch,
-) -> None:
-    """By its directory, its .mcap file or ``.`` inside it; a bag of another name does not
-    (with a scene's actuator unseen, the replay reported a precision loss of 0)."""
-    directory = BUNDLED_BAGS / "sudden-jam"
-    assert bundled_scene_of(directory) == "sudden-jam"
-    assert bundled_scene_of(directory / "sudden-jam.mcap") == "sudden-jam"
-    monkeypatch.chdir(directory)
-    assert bundled_scene_of(Path(".")) == "sudden-jam"
-    assert bundled_scene_of(BUNDLED_BAGS) is None
 
 
 def test_cli_checks_output_paths_before_the_replay_and_makes_the_metrics_folder(

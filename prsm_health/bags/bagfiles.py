@@ -4,16 +4,20 @@ A directory must hold ``metadata.yaml`` naming MCAP storage files (rosbag2 forma
 to 9); its topics and types are declared there. A bare ``.mcap`` file is read as it is.
 Compressed storage files (``compression_mode: file`` or ``message``) are refused with a
 :class:`BagError`: bags of this package compress the MCAP chunks instead, which every reader
-understands.
+understands. :func:`custom_data` reads the bag's rosbag2 ``custom_data`` (where
+``prsm-health simulate`` records the scene a bag was simulated from).
 """
 
 from __future__ import annotations
 
+import struct
 from dataclasses import dataclass
 from pathlib import Path, PurePath
 from typing import Any
 
 import yaml
+from mcap.exceptions import McapError
+from mcap.reader import make_reader
 
 from prsm_health.bags.errors import BagError
 
@@ -99,3 +103,37 @@ def _bag_files(bag: Path) -> BagFiles:
             raise BagError(meta, f"topic entry without name and type: {entry!r}")
         topics[topic["name"]] = topic["type"]
     return BagFiles(bag, files, topics)
+
+
+def custom_data(path: str | Path) -> dict[str, str]:
+    """The bag's rosbag2 ``custom_data`` (string keys and values; empty if it has none).
+
+    From ``metadata.yaml`` for a bag directory; for a bare ``.mcap`` file from the ``rosbag2``
+    metadata record that rosbag2 (and rosbags) write with the summary when they close the
+    file: a file cut short has none.
+
+    Raises:
+        BagError: as :func:`bag_files`.
+    """
+    files = bag_files(path)
+    if files.topics is None:  # a bare .mcap file
+        info = _mcap_information(files.path)
+    else:
+        info = _information(files.path / METADATA)
+    data = info.get("custom_data")
+    if not isinstance(data, dict):
+        return {}
+    return {k: v for k, v in data.items() if isinstance(k, str) and isinstance(v, str)}
+
+
+def _mcap_information(mcap: Path) -> dict[str, Any]:
+    """The rosbag2 metadata serialised into an MCAP file (empty if it cannot be read)."""
+    try:
+        with mcap.open("rb") as stream:
+            for record in make_reader(stream).iter_metadata():
+                if record.name == "rosbag2":
+                    loaded = yaml.safe_load(record.metadata.get("serialized_metadata", ""))
+                    return loaded if isinstance(loaded, dict) else {}
+    except (OSError, McapError, struct.error, ValueError, yaml.YAMLError):
+        return {}  # a damaged or foreign file: no metadata to read
+    return {}

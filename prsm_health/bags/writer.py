@@ -124,6 +124,11 @@ class BagWriter:
         """Topics added so far: name -> message type."""
         return {topic: c.msgtype for topic, c in self._connections.items()}
 
+    def set_custom_data(self, key: str, value: str) -> None:
+        """Store ``key: value`` in the bag's rosbag2 ``custom_data`` (``metadata.yaml`` and the
+        MCAP's ``rosbag2`` metadata record, written when the bag is closed)."""
+        self._writer.set_custom_data(key, value)
+
     def add_topic(self, topic: str, msgtype: str) -> None:
         """Declare ``topic`` with message type ``msgtype`` (again with the same type: no-op).
 

@@ -10,9 +10,10 @@ count every sample, and come before the node's stale timeout (1 s; they are publ
 :data:`DIAGNOSTICS_RATE_HZ`), after which they would all be STALE.
 
 The node's estimator parameters are the bundled config/default.yaml with the ``actuator``
-section of the bag's scene when the bag is named after a bundled scene: the scenes accelerate
-wear (``wear_acceleration``) so that a minute shows a measurable precision loss, and the
-estimator must know by how much.
+section of the scene the bag was simulated from, when it says
+(:func:`~prsm_health.scenes.recording.bag_actuator`): the scenes accelerate wear
+(``wear_acceleration``) so that a minute shows a measurable precision loss, and the estimator
+must know by how much.
 """
 
 from __future__ import annotations
@@ -23,7 +24,6 @@ import subprocess
 import sys
 import time
 from collections.abc import Callable
-from importlib import resources
 from pathlib import Path
 from threading import Event
 from typing import IO, Any, NamedTuple
@@ -37,7 +37,7 @@ from prsm_health.bags.reader import read_truth
 from prsm_health.ros.monitor import Monitor, MonitorOptions
 from prsm_health.ros.parameters import default_params_file
 from prsm_health.ros.runtime import loopback_env, ros_session
-from prsm_health.scenes.scene import scene_names
+from prsm_health.scenes.recording import bag_actuator
 from prsm_health.yamlio import load_yaml_mapping
 
 DEMO_DOMAIN_ID = 42
@@ -70,16 +70,15 @@ def bag_duration_s(bag: Path) -> float:
 
 def demo_params(bag: Path, workdir: Path) -> tuple[Path, str]:
     """The node's params file for ``bag`` (module docstring) and a line saying what it is."""
-    params = load_yaml_mapping(default_params_file())
-    scene = bag.resolve().name
-    if scene not in scene_names():
+    scene = bag_actuator(bag)
+    if scene is None:
         return default_params_file(), f"params {default_params_file()}"
-    scene_file = resources.files("prsm_health.scenes") / "data" / f"{scene}.yaml"
-    params["actuator"] = load_yaml_mapping(Path(str(scene_file)))["actuator"]
+    params = load_yaml_mapping(default_params_file())
+    params["actuator"] = scene.section
     path = workdir / "params.yaml"
     path.write_text(yaml.safe_dump(params, sort_keys=False))
-    acceleration = params["actuator"].get("wear_acceleration", 1.0)
-    return path, f"params {path}: the actuator of scene {scene} (wear x {acceleration:g})"
+    acceleration = scene.actuator.wear_acceleration
+    return path, f"params {path}: the actuator of {scene.origin}, wear x {acceleration:g}"
 
 
 class TruthPoint(NamedTuple):

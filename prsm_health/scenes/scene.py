@@ -14,6 +14,8 @@ from importlib import resources
 from pathlib import Path
 from typing import Any
 
+import yaml
+
 from prsm_health.actuator import Actuator, actuator_from_mapping
 from prsm_health.physics.errors import ParameterError
 from prsm_health.scenes.drive import SpeedLoop
@@ -94,8 +96,16 @@ class Scene:
     sensor_faults: SensorFaults = field(default_factory=SensorFaults)
     truth_rate_hz: float = 100.0
     joint_states: bool = False
+    #: The ``actuator`` section as the scene file wrote it (YAML), recorded into the bags
+    #: simulated from the scene (:mod:`prsm_health.scenes.recording`); it must build
+    #: ``actuator``. None for a scene built in code: its bags record no actuator.
+    actuator_yaml: str | None = field(default=None, compare=False, repr=False)
 
     def __post_init__(self) -> None:
+        if self.actuator_yaml is not None and (
+            actuator_from_mapping(yaml.safe_load(self.actuator_yaml)) != self.actuator
+        ):
+            raise ParameterError("actuator", "does not match the section it was read from")
         if not text(self, "name"):
             raise ParameterError("name", "must not be empty")
         text(self, "description")
@@ -166,6 +176,7 @@ def scene_from_mapping(data: dict[str, Any]) -> Scene:
     return Scene(
         **{key: data[key] for key in _SCALARS if key in data},
         actuator=actuator,
+        actuator_yaml=yaml.safe_dump(data["actuator"], sort_keys=False),
         profile=profile_from_mapping(data["profile"]),
         radial_load=radial_load_from_mapping(data.get("radial_load")),
         load_noise=section(LoadNoise, data.get("load_noise"), "load_noise"),

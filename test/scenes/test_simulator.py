@@ -99,6 +99,7 @@ def steady_scene(*, jams: tuple[Jam, ...], radial_n: float, tilt: Misalignment) 
     return dataclasses.replace(
         base,
         actuator=dataclasses.replace(base.actuator, misalignment=tilt),
+        actuator_yaml=None,  # no longer the file's section
         radial_load=ConstantRadial(value_n=radial_n),
         jams=jams,
         sensors=IDEAL_SENSORS,

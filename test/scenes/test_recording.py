@@ -1,0 +1,126 @@
+"""A simulated bag records the actuator of its scene; replay and demo find it by any name."""
+
+from __future__ import annotations
+
+import dataclasses
+import re
+import shutil
+from pathlib import Path
+
+import pytest
+import yaml
+
+from prsm_health.bags.bagfiles import custom_data
+from prsm_health.cli import main
+from prsm_health.physics.errors import ParameterError
+from prsm_health.ros.demo import demo_params
+from prsm_health.scenes.recording import ACTUATOR_KEY, SCENE_KEY, bag_actuator, bundled_scene_of
+from prsm_health.scenes.scene import load_scene
+
+ROOT = Path(__file__).resolve().parents[2]
+BUNDLED_BAGS = ROOT / "bags"
+
+
+@pytest.fixture(scope="module")
+def renamed(tmp_path_factory: pytest.TempPathFactory) -> Path:
+    """Five seconds of sudden-jam (wear x 1e5) simulated into a bag of another name."""
+    out = tmp_path_factory.mktemp("recording") / "mission-7"
+    assert main(["simulate", "--scene", "sudden-jam", "--duration", "5", "--out", str(out)]) == 0
+    return out
+
+
+def test_the_bag_records_its_scene_and_actuator_section(renamed: Path) -> None:
+    data = custom_data(renamed)
+    assert data[SCENE_KEY] == "sudden-jam"
+    assert yaml.safe_load(data[ACTUATOR_KEY]) == {
+        "preset": "dong2022-downhole",
+        "wear_acceleration": 1.0e5,
+    }
+    # The bare .mcap holds the same record (rosbag2's metadata record, in its summary).
+    assert custom_data(renamed / "mission-7.mcap") == data
+
+
+def test_a_renamed_or_bare_bag_gives_its_scenes_actuator(renamed: Path, tmp_path: Path) -> None:
+    expected = load_scene("sudden-jam").actuator
+    for bag in (renamed, renamed / "mission-7.mcap"):
+        found = bag_actuator(bag)
+        assert found is not None and found.actuator == expected
+        assert found.origin == "scene sudden-jam (recorded in the bag)"
+    # A copy cut short has lost the record (it is written when the bag is closed) ...
+    data = (renamed / "mission-7.mcap").read_bytes()
+    cut = tmp_path / "cut.mcap"
+    cut.write_bytes(data[: len(data) // 2])
+    assert custom_data(cut) == {} and bag_actuator(cut) is None
+    # ... but one named after a bundled scene still gives that scene's.
+    named = tmp_path / "sudden-jam.mcap"
+    shutil.copy(cut, named)
+    found = bag_actuator(named)
+    assert found is not None and found.actuator == expected
+    assert found.origin == "scene sudden-jam (the bag's name)"
+
+
+def test_replay_takes_the_recorded_actuator_over_the_params_files(
+    renamed: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    """With the default file given as --params, the replay ran on its actuator (wear x 1) and
+    reported a precision loss of 0 against the truth's (error -100 %)."""
+    default = ROOT / "config" / "default.yaml"
+    assert main(["replay", str(renamed), "--params", str(default)]) == 0
+    out = capsys.readouterr().out
+    assert "actuator of scene sudden-jam (recorded in the bag) instead of the file's" in out
+    error = float(out.split("precision loss error ")[1].split(" %")[0])
+    assert abs(error) < 10.0, out
+    # --scene still chooses another (the wear x 1 of an actuator written for it).
+    other = renamed.parent / "wear1.yaml"
+    scene = yaml.safe_load(
+        (ROOT / "prsm_health" / "scenes" / "data" / "sudden-jam.yaml").read_text()
+    )
+    scene["actuator"]["wear_acceleration"] = 1.0
+    other.write_text(yaml.safe_dump(scene))
+    assert main(["replay", str(renamed), "--scene", str(other)]) == 0
+    out = capsys.readouterr().out
+    assert f"actuator of scene {other}" in out
+    assert float(out.split("precision loss error ")[1].split(" %")[0]) < -99.0
+
+
+def test_the_demo_gives_the_node_the_recorded_actuator(renamed: Path, tmp_path: Path) -> None:
+    path, line = demo_params(renamed, tmp_path)
+    params = yaml.safe_load(path.read_text())
+    assert params["actuator"] == {"preset": "dong2022-downhole", "wear_acceleration": 1.0e5}
+    assert line.endswith("the actuator of scene sudden-jam (recorded in the bag), wear x 100000")
+
+
+def test_an_invalid_recorded_actuator_names_the_bag_and_the_field(
+    renamed: Path, tmp_path: Path
+) -> None:
+    bag = tmp_path / "bag"
+    shutil.copytree(renamed, bag)
+    meta = bag / "metadata.yaml"
+    info = yaml.safe_load(meta.read_text())
+    info["rosbag2_bagfile_information"]["custom_data"][ACTUATOR_KEY] = "preset: no-such-preset\n"
+    meta.write_text(yaml.safe_dump(info))
+    where = re.escape(f"{bag}: custom_data {ACTUATOR_KEY}: preset: unknown preset")
+    with pytest.raises(ParameterError, match=where):
+        bag_actuator(bag)
+
+
+def test_a_scene_whose_actuator_was_replaced_must_drop_the_files_section() -> None:
+    """Else its bags would record an actuator they were not simulated with."""
+    scene = load_scene("sudden-jam")
+    other = load_scene("accelerated-wear").actuator
+    assert other != scene.actuator
+    with pytest.raises(ParameterError, match="actuator: does not match the section"):
+        dataclasses.replace(scene, actuator=other)
+    assert dataclasses.replace(scene, actuator=other, actuator_yaml=None).actuator == other
+
+
+def test_a_bag_named_after_a_bundled_scene_is_found_by_its_name(
+    monkeypatch: pytest.MonkeyPatch,
+) -> None:
+    """By its directory, its .mcap file or ``.`` inside it; a bag of another name is not."""
+    directory = BUNDLED_BAGS / "sudden-jam"
+    assert bundled_scene_of(directory) == "sudden-jam"
+    assert bundled_scene_of(directory / "sudden-jam.mcap") == "sudden-jam"
+    monkeypatch.chdir(directory)
+    assert bundled_scene_of(Path(".")) == "sudden-jam"
+    assert bundled_scene_of(BUNDLED_BAGS) is None
