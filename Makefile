@@ -12,11 +12,12 @@ MSGS := msg_defs/prsm_health_msgs
 # Limit for the whole pytest run, in seconds (per-test limits: pytest-timeout, pyproject.toml).
 TEST_RUN_TIMEOUT ?= 840
 
-# DDS hard rules: loopback only, no shared-memory transport, logs inside the build tree.
+# DDS hard rules, not overridable: loopback only, no shared-memory transport. ROS logs go to
+# the build tree unless ROS_LOG_DIR is set (the environment's or the command line's wins).
 # ROS_DOMAIN_ID is chosen per test process by test/conftest.py, and by the demo target below.
 export ROS_AUTOMATIC_DISCOVERY_RANGE := LOCALHOST
 export FASTDDS_BUILTIN_TRANSPORTS := UDPv4
-export ROS_LOG_DIR := $(BUILD)/ros_log
+export ROS_LOG_DIR ?= $(BUILD)/ros_log
 
 # Stamps live inside the venv, so deleting .venv also forgets what was built into it.
 REQS_STAMP := $(VENV)/.stamp-requirements

@@ -4,7 +4,8 @@
 [--params YAML]`` runs :func:`~prsm_health.benchmark.run_benchmark` on the full plan (about
 half an hour on 2 cores; with ``--held-out``, its generated runs drawn from other seeds) or the
 CI-sized ``--quick`` one and writes ``results.json``, ``results.md`` and ``pareto.png`` into
-``--out`` (default ``build/bench``). ``--params`` benchmarks other estimator parameters than
+``--out`` (default ``build/bench``); ``--scenes`` and ``--configs`` restrict the plan, and the
+files' titles name the restriction. ``--params`` benchmarks other estimator parameters than
 the bundled ``config/default.yaml`` (each scene's actuator still comes from the scene). The
 floors are printed (measured, pass/fail); the exit code does not depend on them.
 docs/performance.md explains the plan and the latest run.
@@ -78,6 +79,13 @@ def run_bench(args: argparse.Namespace) -> int:
     if missing:
         raise ValueError(f"--bags: no bag {', '.join(missing)} (make bags)")
     plan = select(plan, scenes=args.scenes, configs=args.configs)
+    restricted = [
+        f"{what} {' '.join(names)}"
+        for what, names in (("scenes", args.scenes), ("configurations", args.configs))
+        if names is not None
+    ]
+    if restricted:  # the titles of the files say what ran
+        plan = dataclasses.replace(plan, mode=f"{plan.mode}, restricted to {'; '.join(restricted)}")
     if args.params is not None:
         try:  # checked before anything runs, and named by the option
             base_params(args.params)

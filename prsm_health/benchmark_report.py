@@ -660,12 +660,25 @@ def _wear(results: BenchResults) -> list[str]:
     return _table(header, rows)
 
 
+def run_label(mode: str) -> str:
+    """The run as the titles name it: the plan's name, "run", then the qualifiers the mode
+    adds after a comma (``full run``, ``full run, held-out seed 7``, ``quick run, restricted
+    to scenes bags; configurations default``)."""
+    plan, comma, qualifiers = mode.partition(",")
+    return f"{plan} run{comma}{qualifiers}"
+
+
+def _naive_too(results: BenchResults) -> str:
+    """The excerpt's note that the naive configuration ran on it, empty if it did not."""
+    return " (naive too)" if results.runs_of(kind="excerpt", config="naive") else ""
+
+
 def markdown(results: BenchResults, found: list[Floor]) -> str:
     """``results.md``: the floors, then the tables."""
     configs = list(dict.fromkeys(r.config for r in results.runs))
     machine = results.machine
     lines = [
-        f"# Estimator benchmark ({results.mode} run)",
+        f"# Estimator benchmark ({run_label(results.mode)})",
         "",
         f"{machine['cpus']} CPUs ({machine['processor'] or machine['machine']}), Python "
         f"{machine['python']}, load average {machine['load_average_1min_at_start']:.2f} at "
@@ -704,8 +717,8 @@ def markdown(results: BenchResults, found: list[Floor]) -> str:
     if results.runs_of(kind="excerpt"):
         lines += [
             "",
-            f"## Naive excerpt: the first {results.plan['naive_seconds']:g} s of "
-            f"{', '.join(results.plan['naive_scenes'])}",
+            f"## Excerpt: the first {results.plan['naive_seconds']:g} s of "
+            f"{', '.join(results.plan['naive_scenes'])}{_naive_too(results)}",
             "",
             *_runs_table(results.runs_of(kind="excerpt"), EXCERPT_COLUMNS),
         ]
@@ -752,11 +765,12 @@ Panel = tuple[str, list[tuple[float, float, str]]]
 
 def pareto(results: BenchResults, path: Path) -> None:
     """Mean cost per sample (log x) against load RMSE, one point per configuration: on the
-    full runs, and on the naive excerpt (where every configuration ran)."""
+    full runs, and on the naive excerpt (where every configuration ran, naive too if it was
+    one of them)."""
     titles = {
         "full": "full runs: scenes every configuration ran",
         "excerpt": f"first {results.plan['naive_seconds']:g} s of "
-        f"{len(results.plan['naive_scenes'])} bags (naive too)",
+        f"{len(results.plan['naive_scenes'])} bags{_naive_too(results)}",
     }
     panels = [
         (
@@ -769,7 +783,8 @@ def pareto(results: BenchResults, path: Path) -> None:
         for kind, title in titles.items()
         if (by_config := common_runs(results, kind))
     ]
-    plot_pareto(panels, f"Estimator configurations: time against error ({results.mode} run)", path)
+    title = f"Estimator configurations: time against error ({run_label(results.mode)})"
+    plot_pareto(panels, title, path)
 
 
 def plot_pareto(panels: list[Panel], title: str, path: Path) -> None:

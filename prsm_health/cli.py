@@ -18,9 +18,7 @@ import json
 import math
 import os
 import shutil
-import signal
 import sys
-import threading
 from collections.abc import Sequence
 from pathlib import Path
 from typing import Any, NoReturn
@@ -28,6 +26,7 @@ from typing import Any, NoReturn
 from tqdm import tqdm
 
 from prsm_health.bench_command import add_bench_command
+from prsm_health.interrupt import EXIT_INTERRUPTED, stop_on_interrupt
 from prsm_health.physics.errors import PhysicsError
 from prsm_health.physics.geometry import Misalignment
 from prsm_health.physics.load_distribution import LoadingCase
@@ -45,8 +44,6 @@ EXIT_BROKEN_PIPE = 141
 #: Bytes per motor sample of a simulated bag with its truth, a little above those measured
 #: (43 on nominal-downhole; 82 with /joint_states, counted as twice this).
 BAG_BYTES_PER_SAMPLE = 50
-#: Exit code of a ``simulate`` stopped by Ctrl-C (128 + SIGINT, as a shell reports it).
-EXIT_INTERRUPTED = 130
 RPM_TO_RAD_S = 2.0 * math.pi / 60.0
 M_PER_S_TO_UM_PER_H = 1e6 * 3600.0
 
@@ -59,14 +56,22 @@ class _Parser(argparse.ArgumentParser):
 
 
 def _finite(text: str) -> float:
-    value = float(text)
+    """A finite number (argparse type), refused as ``invalid finite number: '30000k'``."""
+    try:
+        value = float(text)
+    except ValueError:
+        value = math.nan
     if not math.isfinite(value):
-        raise argparse.ArgumentTypeError(f"not a finite number: {text!r}")
+        raise argparse.ArgumentTypeError(f"invalid finite number: {text!r}")
     return value
 
 
 def _build_parser() -> _Parser:
-    parser = _Parser(prog="prsm-health", description=__doc__.splitlines()[0])
+    parser = _Parser(
+        prog="prsm-health",
+        description="Health monitoring of a planetary roller screw actuator: its physics "
+        "model, scene simulation, bag replay, benchmark and ROS tools.",
+    )
     commands = parser.add_subparsers(dest="command", required=True, parser_class=_Parser)
 
     model = commands.add_parser("model", help="evaluate the physics at one operating point")
@@ -74,12 +79,27 @@ def _build_parser() -> _Parser:
     model.add_argument(
         "--preset", required=True, help=f"one of {', '.join(PRESET_NAMES)}, or a YAML file"
     )
-    model.add_argument("--axial-load", type=_finite, required=True, metavar="N")
-    model.add_argument("--radial-load", type=_finite, default=0.0, metavar="N")
-    model.add_argument("--speed-rpm", type=_finite, default=300.0, metavar="RPM")
+    model.add_argument(
+        "--axial-load", type=_finite, required=True, metavar="N", help="axial load [N]"
+    )
+    model.add_argument(
+        "--radial-load", type=_finite, default=0.0, metavar="N", help="radial load [N] (default 0)"
+    )
+    model.add_argument(
+        "--speed-rpm",
+        type=_finite,
+        default=300.0,
+        metavar="RPM",
+        help="screw speed [rpm] (default 300)",
+    )
     model.add_argument("--jammed", type=int, default=0, metavar="K", help="jammed rollers")
     model.add_argument(
-        "--misalignment-arcmin", type=_finite, nargs=2, default=(0.0, 0.0), metavar=("X", "Y")
+        "--misalignment-arcmin",
+        type=_finite,
+        nargs=2,
+        default=(0.0, 0.0),
+        metavar=("X", "Y"),
+        help="screw tilt about x and y [arcmin] (default 0 0)",
     )
     model.add_argument(
         "--case",
@@ -88,7 +108,13 @@ def _build_parser() -> _Parser:
         default=1,
         help="1: screw in tension, nut in compression (as 004); 2: both in compression",
     )
-    model.add_argument("--carrier-angle-deg", type=_finite, default=0.0, metavar="DEG")
+    model.add_argument(
+        "--carrier-angle-deg",
+        type=_finite,
+        default=0.0,
+        metavar="DEG",
+        help="roller carrier angle against the radial load [deg] (default 0)",
+    )
     model.add_argument(
         "--elastic-errors", action="store_true", help="add 000's torsion elastic error"
     )
@@ -259,13 +285,11 @@ def _run_simulate(args: argparse.Namespace) -> int:
             raise ValueError(f"{args.out} exists (use --force to replace a bag)")
         _remove_bag(args.out)
     simulator = Simulator(scene, exact=True if args.exact else None)
-    stop = threading.Event()
-    previous = signal.signal(signal.SIGINT, lambda _signal, _frame: stop.set())
-    try:
-        with tqdm(total=scene.samples, unit="sample", unit_scale=True, disable=None) as bar:
-            motor, truth = record(simulator, args.out, progress=bar.update, stop=stop)
-    finally:
-        signal.signal(signal.SIGINT, previous)
+    with (
+        stop_on_interrupt() as stop,
+        tqdm(total=scene.samples, unit="sample", unit_scale=True, disable=None) as bar,
+    ):
+        motor, truth = record(simulator, args.out, progress=bar.update, stop=stop)
     print(f"{args.out}: scene {scene.name}, {motor} motor samples, {truth} truth samples")
     if stop.is_set():
         seconds = motor / scene.rate_hz

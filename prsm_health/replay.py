@@ -11,11 +11,14 @@ JointState by :class:`~prsm_health.bags.reader.InputTopics`) chunk by chunk, run
 - scores the estimates against the bag's ``/truth/state`` (:mod:`~prsm_health.estimation.metrics`).
 
 A damaged bag (cut short, a corrupt chunk) is not fatal: everything read before the damage is
-estimated and reported, and the damage is returned in :attr:`ReplayResult.damage`.
+estimated and reported, and the damage is returned in :attr:`ReplayResult.damage`. A replay
+stopped early (``stop``, Ctrl-C in the command) likewise ends with what was read: the output
+bag closed complete, the truth scored up to the last sample read.
 """
 
 from __future__ import annotations
 
+import threading
 import time
 from collections import Counter
 from collections.abc import Callable, Iterator
@@ -66,8 +69,8 @@ class ReplayResult:
     states: every estimate. counters: the estimator's input counters. samples: samples read.
     truth: the bag's ground truth (None without /truth/state). metrics: scores against it.
     damage: the error that ended reading early (the rest of the result covers what was read
-    before it), or None. elapsed_s: wall time of reading and estimating (without writing
-    ``out`` or scoring).
+    before it), or None. stopped: the replay was stopped before the end of the bag (the same).
+    elapsed_s: wall time of reading and estimating (without writing ``out`` or scoring).
     """
 
     states: list[HealthState]
@@ -76,6 +79,7 @@ class ReplayResult:
     truth: TruthSamples | None
     metrics: Metrics | None
     damage: BagError | None
+    stopped: bool
     elapsed_s: float
 
 
@@ -95,18 +99,22 @@ def replay(
     out: Path | None = None,
     hardware_id: str = "prsm_health",
     progress: Callable[[int], None] | None = None,
+    stop: threading.Event | None = None,
 ) -> ReplayResult:
     """Run the estimator over ``bag`` (see the module docstring).
 
-    ``progress`` is called with the number of samples of each chunk read. Raises BagError
-    when the bag cannot be read at all (no such file, no input topic); damage after the start
-    is returned in the result instead.
+    ``progress`` is called with the number of samples of each chunk read; once ``stop`` is
+    set, the replay ends after the chunk being estimated. Raises BagError when the bag cannot
+    be read at all (no such file, no input topic); damage after the start is returned in the
+    result instead.
     """
     topics = topics or InputTopics()
     estimator = HealthEstimator(params)
     states: list[HealthState] = []
     damage: list[BagError] = []
     samples = 0
+    last_stamp_s = -np.inf  # of the samples read
+    stopped = False
     elapsed = 0.0
     with ExitStack() as stack:
         output = stack.enter_context(_Output(out, params, hardware_id)) if out else None
@@ -123,15 +131,21 @@ def replay(
                     output.add(piece, new, estimator.counters)
                 started = time.perf_counter()
             samples += len(chunk)
+            last_stamp_s = max(last_stamp_s, float(chunk.stamp_s.max(initial=-np.inf)))
             if progress is not None:
                 progress(len(chunk))
             started = time.perf_counter()
+            if stop is not None and stop.is_set():
+                stopped = True
+                break
         last = estimator.finish()
         elapsed += time.perf_counter() - started
         states += last
         if output is not None:
             output.add(None, last, estimator.counters)
     truth = _truth(bag, damage)
+    if truth is not None and stopped:  # what came after the last sample read was not seen
+        truth = truth[truth.stamp_s <= last_stamp_s]
     metrics = None
     if truth is not None and states and len(truth):
         preset = params.actuator.preset
@@ -148,6 +162,7 @@ def replay(
         truth=truth,
         metrics=metrics,
         damage=damage[0] if damage else None,
+        stopped=stopped,
         elapsed_s=elapsed,
     )
 

@@ -29,6 +29,7 @@ from prsm_health.bags.topics import MOTOR_FRAME
 from prsm_health.estimation.estimate import UM_PER_M
 from prsm_health.estimation.inputs import RejectReason
 from prsm_health.estimation.params import EstimatorParams, bundled_params_file, params_from_mapping
+from prsm_health.interrupt import EXIT_INTERRUPTED, stop_on_interrupt
 from prsm_health.replay import ReplayResult, replay
 from prsm_health.scenes.recording import bag_actuator, scene_actuator
 from prsm_health.yamlio import YamlError, load_yaml_mapping
@@ -38,12 +39,33 @@ def add_replay_command(commands: Any) -> None:
     """Register ``replay`` on the CLI's subparsers."""
     parser = commands.add_parser("replay", help="run the estimator over a bag (as fast as it can)")
     parser.add_argument("bag", type=Path, help="rosbag2 directory or .mcap file")
-    parser.add_argument("--params", type=Path, metavar="YAML", help="estimator parameters")
-    parser.add_argument("--scene", metavar="NAME|FILE", help="take the actuator from a scene")
-    parser.add_argument("--out", type=Path, metavar="OUT", help="write inputs, health, diagnostics")
+    parser.add_argument(
+        "--params",
+        type=Path,
+        metavar="YAML",
+        help="estimator parameters (default: the bundled config/default.yaml)",
+    )
+    parser.add_argument(
+        "--scene",
+        metavar="NAME|FILE",
+        help="take the actuator from a scene (default: the one a simulated bag records)",
+    )
+    parser.add_argument(
+        "--out",
+        type=Path,
+        metavar="OUT",
+        help="write a bag directory with the inputs, health and diagnostics",
+    )
     parser.add_argument("--report", type=Path, metavar="DIR", help="write PNG plots and index")
-    parser.add_argument("--metrics-json", type=Path, metavar="FILE", help="write the metrics")
-    parser.add_argument("--motor-state-topic", default="/motor_state", metavar="TOPIC")
+    parser.add_argument(
+        "--metrics-json", type=Path, metavar="FILE", help="write the scores against the truth"
+    )
+    parser.add_argument(
+        "--motor-state-topic",
+        default="/motor_state",
+        metavar="TOPIC",
+        help="the MotorState input (default /motor_state)",
+    )
     parser.add_argument(
         "--joint-states", metavar="TOPIC", help="read sensor_msgs/JointState from TOPIC instead"
     )
@@ -119,7 +141,8 @@ def _check_outputs(args: argparse.Namespace) -> None:
 
 
 def run_replay(args: argparse.Namespace) -> int:
-    """Replay the bag, print a summary, write what was asked; 1 if the bag was damaged.
+    """Replay the bag, print a summary, write what was asked; 1 if the bag was damaged, 130
+    if Ctrl-C stopped it (what was read is reported and written all the same).
 
     Raises:
         ValueError: an output that cannot be written, or no sample of the bag accepted (the
@@ -139,7 +162,10 @@ def run_replay(args: argparse.Namespace) -> int:
         ),
     )
     bag_files(args.bag)  # a missing or malformed bag fails here, before any output
-    with tqdm(unit="sample", unit_scale=True, disable=None, file=sys.stderr) as bar:
+    with (
+        tqdm(unit="sample", unit_scale=True, disable=None, file=sys.stderr) as bar,
+        stop_on_interrupt() as stop,
+    ):
         result = replay(
             args.bag,
             params,
@@ -147,8 +173,10 @@ def run_replay(args: argparse.Namespace) -> int:
             out=args.out,
             progress=bar.update,
             hardware_id=args.hardware_id,
+            stop=stop,
         )
     print(summary(args.bag, source, result))
+    written = [f"bag {args.out}"] if args.out is not None else []
     if not result.counters.accepted:
         why = f"no sample of {args.bag} accepted: {_rejected_why(args.bag, topics, result)}"
         if result.damage is not None:  # the damage says more than what it left
@@ -166,6 +194,7 @@ def run_replay(args: argparse.Namespace) -> int:
                 raise ValueError(
                     f"--metrics-json: cannot write {args.metrics_json}: {exc}"
                 ) from exc
+            written.append(f"metrics {args.metrics_json}")
     if args.report is not None:
         from prsm_health.report import write_report  # matplotlib: only when a report is asked
 
@@ -175,6 +204,11 @@ def run_replay(args: argparse.Namespace) -> int:
             )
         except OSError as exc:
             raise ValueError(f"--report: cannot write into {args.report}: {exc}") from exc
+        written.append(f"report {args.report / 'index.html'}")
+    if written:
+        print(f"  wrote {', '.join(written)}")
+    if result.stopped:
+        return EXIT_INTERRUPTED
     return 1 if result.damage is not None else 0
 
 
@@ -207,6 +241,8 @@ def summary(bag: Path, source: str, result: ReplayResult) -> str:
     ]
     if result.damage is not None:
         lines.append(f"  DAMAGED: {result.damage} (estimates cover what was read before it)")
+    if result.stopped:
+        lines.append("  STOPPED by Ctrl-C: the estimates and scores cover what was read")
     if result.states:
         last = result.states[-1]
         probabilities = ", ".join(

@@ -1,13 +1,15 @@
 """The replay's report: PNG plots of the estimates against the truth, and an index page.
 
 ``prsm-health replay BAG --report DIR`` writes ``load.png`` (axial load with +-2 std and the
-truth; with the truth, a second panel of the error, estimate minus truth, inside its own +-2
-std: readable where an hour of strokes makes the first one a solid block), ``jams.png``
-(probability of each jam count over time, the true count on top), ``precision_loss.png``
-(estimate +-2 std, cut at zero, and the truth) and ``index.html`` (the three plots and the
-metrics). After a sensor time reset the estimates are drawn on the truth's clock, shifted by
-the offsets the metrics found (the x label says by how much). matplotlib's
-Agg backend: no display needed.
+truth, the axis spanning the estimate and the truth: the band, tens of kN wide where the load
+is hardly observed, is cut off; with the truth, a second panel of the error, estimate minus
+truth, inside its own +-2 std: readable where an hour of strokes makes the first one a solid
+block), ``jams.png`` (probability of each jam count over time, the true count on top),
+``precision_loss.png`` (estimate +-2 std, cut at zero, and the truth) and ``index.html`` (the
+three plots and the metrics). The truth is drawn wide, dashed and pale under the estimate's
+line, so that both show where they coincide. After a sensor time reset the estimates are
+drawn on the truth's clock, shifted by the offsets the metrics found (the x label says by how
+much). matplotlib's Agg backend: no display needed.
 """
 
 from __future__ import annotations
@@ -39,6 +41,10 @@ PLOTS = ("load.png", "jams.png", "precision_loss.png")
 ERROR_AXIS_QUANTILE = 0.99
 ERROR_AXIS_MARGIN = 2.0
 SMALLEST_ERROR_AXIS_KN = 0.01
+#: The load panel's axis: the range of the estimate and the truth, widened by this fraction
+#: of it (of the smallest span at least) on either side [-, kN].
+LOAD_AXIS_MARGIN = 0.1
+SMALLEST_LOAD_SPAN_KN = 1.0
 
 
 @dataclass(frozen=True)
@@ -85,6 +91,12 @@ def _band(
     axis.plot(t, mean, lw=1.0, label=label)
 
 
+def _truth(axis: Axes, t: FloatArray, values: FloatArray) -> None:
+    """The truth beside an estimate: wide, dashed and pale, under the estimate's line, so that
+    both show where they coincide."""
+    axis.plot(t, values, "k--", lw=2.5, alpha=0.4, zorder=1.5, label="truth")
+
+
 def _load_figure(series: _Series, truth: TruthSamples | None, *, xlabel: str, title: str) -> Figure:
     """The axial load with its band and the truth; with the truth, below it the error
     (estimate minus the truth interpolated to each estimate, as the metrics score it) inside
@@ -110,11 +122,23 @@ def _load_figure(series: _Series, truth: TruthSamples | None, *, xlabel: str, ti
             error_axis.set_ylim(
                 -max(limit, SMALLEST_ERROR_AXIS_KN), max(limit, SMALLEST_ERROR_AXIS_KN)
             )
-            error_axis.set_title("scaled to the errors in motion (wider bands cut off)", fontsize=9)
-        error_axis.legend(loc="best")
+            error_axis.set_title(
+                "scaled to the errors in motion (wider bands cut off)", fontsize=9, loc="left"
+            )
+        # Above the axes, beside the title: inside, every place is covered on a long run.
+        error_axis.legend(
+            loc="lower right", bbox_to_anchor=(1.0, 1.0), ncols=2, fontsize=8, frameon=False
+        )
     _band(axis, t, series.load_kn, series.load_std_kn, "estimate")
+    shown = series.load_kn
     if truth is not None:
-        axis.plot(truth.stamp_s, truth.axial_load_n / 1e3, "k--", lw=0.8, label="truth")
+        _truth(axis, truth.stamp_s, truth.axial_load_n / 1e3)
+        shown = np.concatenate([shown, truth.axial_load_n / 1e3])
+    shown = shown[np.isfinite(shown)]
+    if shown.size:  # the loads set the axis, not the band
+        low, high = float(shown.min()), float(shown.max())
+        margin = LOAD_AXIS_MARGIN * max(high - low, SMALLEST_LOAD_SPAN_KN)
+        axis.set_ylim(low - margin, high + margin)
     axis.set(ylabel="axial load [kN]", title=f"{title}: axial load")
     axis.legend(loc="best")
     return figure
@@ -165,7 +189,7 @@ def write_report(
     figure, axis = plt.subplots(figsize=(10, 4))
     _band(axis, t, series.loss_um, series.loss_std_um, "estimate", non_negative=True)
     if truth is not None:
-        axis.plot(truth.stamp_s, truth.precision_loss_m * UM_PER_M, "k--", lw=0.8, label="truth")
+        _truth(axis, truth.stamp_s, truth.precision_loss_m * UM_PER_M)
     axis.set(xlabel=xlabel, ylabel="precision loss [µm]", title=f"{title}: precision loss")
     axis.legend(loc="best")
     figures.append(figure)

@@ -17,6 +17,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
+from prsm_health import bench_command, benchmark_report
 from prsm_health.benchmark import (
     CONFIGURATION_NAMES,
     CONFIGURATIONS,
@@ -40,9 +41,12 @@ from prsm_health.benchmark import (
 from prsm_health.benchmark_report import (
     FILES,
     RMSE_PERCENT,
+    Panel,
     configuration_styles,
     floors,
+    markdown,
     pooled_rmse_percent,
+    run_label,
     write_results,
 )
 from prsm_health.cli import main
@@ -201,6 +205,53 @@ def test_files_hold_the_measured_numbers(results: BenchResults, tmp_path: Path) 
     ]
     cells = re.split(r"(?<!\\)\|", row)[1:-1]  # cells between unescaped pipes
     assert len(cells) == 4  # the requirement's |final error| stays in its cell
+
+
+def test_titles_say_what_ran(
+    results: BenchResults, tmp_path: Path, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    """The titles name the run as its mode says, and the excerpt's "naive too" only when the
+    naive configuration ran on it (the fixture's plan has none)."""
+    drawn: list[tuple[list[Panel], str]] = []
+    monkeypatch.setattr(
+        benchmark_report, "plot_pareto", lambda panels, title, _: drawn.append((panels, title))
+    )
+    restricted = dataclasses.replace(
+        results, mode="full, restricted to scenes bags; configurations default"
+    )
+    write_results(restricted, tmp_path)
+    label = "full run, restricted to scenes bags; configurations default"
+    text = (tmp_path / "results.md").read_text()
+    assert text.startswith(f"# Estimator benchmark ({label})\n")
+    assert "## Excerpt: the first 3 s of tiny-bag\n" in text
+    ((panels, title),) = drawn
+    assert title == f"Estimator configurations: time against error ({label})"
+    assert [panel_title for panel_title, _ in panels][1] == "first 3 s of 1 bags"
+    naive = dataclasses.replace(results.runs_of(kind="excerpt")[0], config="naive")
+    with_naive = dataclasses.replace(restricted, runs=[*results.runs, naive])
+    assert "tiny-bag (naive too)\n" in markdown(with_naive, floors(with_naive))
+    assert run_label("quick") == "quick run"
+    assert run_label("full, held-out seed 7") == "full run, held-out seed 7"
+
+
+def test_cli_names_the_restriction_in_the_mode(monkeypatch: pytest.MonkeyPatch) -> None:
+    """--scenes and --configs restrict the plan, and its mode (the files' titles) says so."""
+
+    class PlannedError(Exception):
+        pass
+
+    def planned(plan: Plan) -> BenchResults:
+        raise PlannedError(plan.mode)
+
+    monkeypatch.setattr(bench_command, "run_benchmark", planned)
+    with pytest.raises(PlannedError, match=r"^quick, restricted to configurations default$"):
+        main(["bench", "--quick", "--configs", "default"])
+    with pytest.raises(
+        PlannedError, match=r"^full, restricted to scenes bags; configurations default$"
+    ):
+        main(["bench", "--scenes", "bags", "--configs", "default"])
+    with pytest.raises(PlannedError, match=r"^quick$"):
+        main(["bench", "--quick"])
 
 
 def test_floors_follow_their_thresholds(results: BenchResults) -> None:

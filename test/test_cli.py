@@ -1,16 +1,20 @@
-"""The ``prsm-health model`` command line: JSON content, table, one-line errors."""
+"""The ``prsm-health`` command line: ``model``'s JSON and table, help texts, one-line errors,
+and the exit codes of ``play`` and ``monitor`` (real processes, DDS isolated by conftest)."""
 
 from __future__ import annotations
 
 import json
 import os
+import signal
 import subprocess
 import sys
+import time
 from pathlib import Path
 
 import pytest
 
 from prsm_health.cli import main
+from test.ros.data import synthetic_run, write_bag
 
 
 def run(capsys: pytest.CaptureFixture[str], *argv: str) -> tuple[int, str, str]:
@@ -174,3 +178,88 @@ def test_a_bad_preset_file_names_the_file_and_the_key(
     assert code == 2
     assert len(err.strip().splitlines()) == 1
     assert f"{path}: largest_axial_load_n: must be at least 1 N" in err
+
+
+def test_help_describes_the_options(capsys: pytest.CaptureFixture[str]) -> None:
+    helps = {}
+    for command in ([], ["model"], ["play"], ["monitor"]):
+        with pytest.raises(SystemExit):
+            main([*command, "--help"])
+        helps[" ".join(command)] = " ".join(capsys.readouterr().out.split())
+    assert "``" not in helps[""] and "planetary roller screw" in helps[""]
+    assert "--axial-load N axial load [N]" in helps["model"]
+    assert "--speed-rpm RPM screw speed [rpm] (default 300)" in helps["model"]
+    assert "--clock-rate HZ /clock messages per second of bag time, with --clock" in helps["play"]
+    assert "--timeout S stop after S seconds (default 0: wait forever)" in helps["monitor"]
+
+
+@pytest.mark.parametrize(
+    ("argv", "expected"),
+    [
+        (["model", "--preset", "x", "--axial-load", "30000k"], "invalid finite number: '30000k'"),
+        (["play", "bag", "--rate", "2x"], "must be a finite number > 0, got '2x'"),
+        (["monitor", "--count", "1.5"], "must be an integer >= 0, got '1.5'"),
+    ],
+)
+def test_a_number_that_is_none_is_named_readably(
+    capsys: pytest.CaptureFixture[str], argv: list[str], expected: str
+) -> None:
+    """The type functions' names (``invalid _finite value``) are not the message."""
+    with pytest.raises(SystemExit) as exc:
+        main(argv)
+    assert exc.value.code == 2
+    err = capsys.readouterr().err
+    assert err.endswith(f"{expected}\n")
+
+
+def test_a_clock_rate_without_the_clock_is_a_usage_error(
+    capsys: pytest.CaptureFixture[str],
+) -> None:
+    code, _, err = run(capsys, "play", "no-bag", "--clock-rate", "50")
+    assert (code, err) == (
+        2,
+        "prsm-health: error: --clock-rate sets the rate of --clock's /clock: give --clock too\n",
+    )
+
+
+def cli(*args: str) -> subprocess.Popen[str]:
+    command = [sys.executable, "-m", "prsm_health", *args]
+    return subprocess.Popen(command, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+
+
+def test_play_with_nothing_to_play_fails_naming_the_topics(tmp_path: Path) -> None:
+    """It printed "nothing published" and exited with 0."""
+    empty = write_bag(tmp_path / "empty", synthetic_run(0.1)[:0])  # the topic, no message
+    for args, asked in (((), "any topic"), (("--topics", "/motor_state"), "/motor_state")):
+        out, err = cli("play", str(empty), *args).communicate(timeout=60)
+        assert (out, err) == (
+            "",
+            f"prsm-health play: error: nothing to play: no message on {asked} in the bag;"
+            " it has /motor_state\n",
+        )
+
+
+def _stop_when_handled(process: subprocess.Popen[str], sig: int) -> tuple[int, str, str]:
+    """Send ``sig`` once the command's ROS session handles SIGTERM (the SigCgt mask of
+    /proc: a signal before it would end Python uncleanly), then its code and output."""
+    deadline = time.monotonic() + 30.0
+    status = Path(f"/proc/{process.pid}/status")
+    while (
+        not int(status.read_text().split("SigCgt:")[1].split()[0], 16) >> (signal.SIGTERM - 1) & 1
+    ):
+        assert process.poll() is None and time.monotonic() < deadline, process.communicate()
+        time.sleep(0.02)
+    process.send_signal(sig)
+    out, err = process.communicate(timeout=30)
+    return process.returncode, out, err
+
+
+@pytest.mark.parametrize("sig", [signal.SIGINT, signal.SIGTERM])
+def test_play_and_monitor_exit_130_when_interrupted(tmp_path: Path, sig: int) -> None:
+    """As simulate, and as a shell reports a command stopped by Ctrl-C (128 + SIGINT); play
+    exited with 0 and monitor with 1."""
+    bag = write_bag(tmp_path / "bag", synthetic_run(0.01))  # 10 s at --rate 0.001
+    code, out, _ = _stop_when_handled(cli("play", str(bag), "--rate", "0.001"), sig)
+    assert code == 130 and out.startswith("play interrupted: "), out
+    code, _, err = _stop_when_handled(cli("monitor", "--node", "/cli_test_nobody"), sig)
+    assert code == 130 and err.startswith("prsm-health monitor: nothing received"), err

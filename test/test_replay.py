@@ -5,8 +5,12 @@ from __future__ import annotations
 import dataclasses
 import json
 import math
+import os
 import shutil
+import signal
+from collections.abc import Callable
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 import pytest
@@ -14,6 +18,8 @@ from mcap.reader import make_reader
 from mcap_ros2.reader import read_ros2_messages
 from rosbags.rosbag2 import Reader
 
+from prsm_health import replay as replay_module
+from prsm_health import replay_command
 from prsm_health.bags import MOTOR_STATE, InputTopics, read_motor_samples, read_truth
 from prsm_health.bags.topics import DIAGNOSTICS_TOPIC, HEALTH_TOPIC
 from prsm_health.bags.typestore import typestore
@@ -21,7 +27,7 @@ from prsm_health.bags.writer import BagWriter, write_motor_states, write_truth
 from prsm_health.cli import main
 from prsm_health.estimation.estimate import EstimateEvent
 from prsm_health.estimation.params import EstimatorParams
-from prsm_health.replay import replay
+from prsm_health.replay import ReplayResult, replay
 from prsm_health.report import _band, _load_figure, _series, plt
 from prsm_health.scenes.recording import record
 from prsm_health.scenes.scene import load_scene, scene_from_mapping
@@ -167,6 +173,35 @@ def test_cli_writes_report_and_metrics_and_exits_1_on_damage(
     mcap.write_bytes(mcap.read_bytes()[:200_000])
     assert main(["replay", str(damaged), "--scene", str(scene_file)]) == 1
     assert "DAMAGED" in capsys.readouterr().out
+
+
+def test_ctrl_c_ends_the_replay_with_what_was_read(
+    tmp_path: Path, capsys: pytest.CaptureFixture[str], monkeypatch: pytest.MonkeyPatch
+) -> None:
+    """A SIGINT after the first chunk (20 s of sudden-jam): the output bag is closed complete,
+    report and metrics cover the 20 s (the second jam, at 25 s, is not scored), exit 130. It
+    was a KeyboardInterrupt traceback, an output bag without metadata.yaml and no report."""
+    real = replay_command.replay
+
+    def interrupted(*args: Any, progress: Callable[[int], None], **kwargs: Any) -> ReplayResult:
+        def then_ctrl_c(samples: int) -> None:
+            progress(samples)
+            os.kill(os.getpid(), signal.SIGINT)
+
+        return real(*args, progress=then_ctrl_c, **kwargs)
+
+    monkeypatch.setattr(replay_command, "replay", interrupted)
+    out, report, metrics = tmp_path / "out", tmp_path / "report", tmp_path / "m.json"
+    argv = ["replay", str(BUNDLED_BAGS / "sudden-jam"), "--out", str(out)]
+    code = main([*argv, "--report", str(report), "--metrics-json", str(metrics)])
+    printed = capsys.readouterr().out
+    assert code == 130, printed
+    assert "STOPPED by Ctrl-C" in printed and f"wrote bag {out}, metrics {metrics}" in printed
+    assert len(read_motor_samples(out, InputTopics())) == replay_module.CHUNK_SAMPLES
+    assert (report / "index.html").is_file()
+    scores = json.loads(metrics.read_text())
+    assert [jam["count"] for jam in scores["jams"]] == [1]
+    assert signal.getsignal(signal.SIGINT) is signal.default_int_handler
 
 
 def test_cli_refuses_a_missing_bag_and_bad_params_in_one_line(
@@ -353,7 +388,9 @@ def test_diagnostics_go_on_after_the_clock_jumps_back(bag: Path, tmp_path: Path)
 
 def test_the_load_plot_shows_the_error_inside_its_band_when_there_is_truth(bag: Path) -> None:
     """With the truth, load.png has a second panel: estimate minus truth (as scored) and the
-    +-2 std band about zero; without, one panel."""
+    +-2 std band about zero, its legend above it (inside, it covered the data); without, one
+    panel. The load's axis spans the estimate and the truth, cutting off the band (tens of kN
+    at the stroke ends), and the estimate's line is drawn over the wider, paler truth."""
     result = replay(bag, params())
     assert result.truth is not None
     series = _series(result.states, None)
@@ -372,6 +409,34 @@ def test_the_load_plot_shows_the_error_inside_its_band_when_there_is_truth(bag: 
         size = np.abs(series.load_kn - true_kn)[moving]
         assert high == -low and np.quantile(size, 0.99) < high <= 2 * np.quantile(size, 0.99)
         assert high < 0.5 * 2 * series.load_std_kn.max()
+        with_truth.canvas.draw()
+        legend = error_axis.get_legend()
+        assert legend is not None
+        assert legend.get_window_extent().y0 >= error_axis.get_window_extent().y1 - 1.0
+        load_axis = with_truth.axes[0]
+        true_load_kn = result.truth.axial_load_n / 1e3
+        shown = np.concatenate([series.load_kn, true_load_kn])
+        low, high = load_axis.get_ylim()
+        margin = 0.1 * (shown.max() - shown.min())
+        assert (low, high) == pytest.approx((shown.min() - margin, shown.max() + margin))
+        wide = _load_figure(
+            dataclasses.replace(series, load_std_kn=100.0 * series.load_std_kn),
+            result.truth,
+            xlabel="t",
+            title="x",
+        )
+        assert wide.axes[0].get_ylim() == (low, high)  # a wider band is cut off
+        plt.close(wide)
+        estimate, truth = load_axis.lines
+        assert truth.get_zorder() < estimate.get_zorder()
+        assert truth.get_linewidth() > estimate.get_linewidth()
+        assert truth.get_linestyle() == "--"
+        assert without.axes[0].get_ylim() == pytest.approx(
+            (
+                series.load_kn.min() - 0.1 * np.ptp(series.load_kn),
+                series.load_kn.max() + 0.1 * np.ptp(series.load_kn),
+            )
+        )
     finally:
         plt.close(with_truth)
         plt.close(without)

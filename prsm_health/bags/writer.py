@@ -80,12 +80,20 @@ class BagWriter:
     left without them (incomplete, as a crashed recorder leaves it).
 
     Args:
-        path: bag directory to create; the MCAP file inside is ``<name>/<name>.mcap``.
+        path: bag directory to create; the MCAP file inside is ``<name>/<name>.mcap``. A
+            name ending in ``.mcap`` is refused (BagError): it would be a directory holding
+            ``<name>.mcap.mcap``, not the MCAP file the name promises.
         compress: zstd-compress the MCAP chunks (default); False writes them uncompressed.
     """
 
     def __init__(self, path: str | Path, *, compress: bool = True) -> None:
         self.path = Path(path)
+        if self.path.suffix == ".mcap":
+            raise BagError(
+                self.path,
+                "a bag is written as a directory (metadata.yaml and <name>/<name>.mcap): give "
+                f"its name without .mcap, e.g. {self.path.with_suffix('')}",
+            )
         try:
             self._writer = _Writer(self.path, version=9, storage_plugin=StoragePlugin.MCAP)
         except WriterError as exc:

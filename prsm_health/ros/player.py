@@ -61,6 +61,8 @@ NS_PER_S = 1e9
 #: is no playback anyone watches (and a far slower one overflowed the wait); at the fastest a
 #: 1 kHz bag's messages are due 1 ns apart, already faster than they can be published.
 RATE_RANGE = (1e-3, 1e6)
+#: The /clock rate by default [Hz of bag time].
+DEFAULT_CLOCK_RATE_HZ = 100.0
 #: The /clock rates [Hz of bag time]: at least one per 100 s, the period of the node's slowest
 #: timer (diagnostics_rate_hz 0.01), which a slower clock would leave behind; at most one per
 #: nanosecond, the resolution of log time (and the period, 1e9 / rate, stays an integer).
@@ -71,8 +73,8 @@ LONGEST_WAIT_S = 3600.0
 
 
 class PlayError(RuntimeError):
-    """The play failed while it ran (no subscriber in time), or a damaged bag has nothing to
-    play before its damage."""
+    """The play failed while it ran (no subscriber in time), or the bag has nothing to play
+    (no message on the topics to play, or none before its damage)."""
 
 
 class PlayInputError(ValueError):
@@ -90,7 +92,7 @@ class PlayOptions:
 
     rate: float = 1.0
     clock: bool = False
-    clock_rate_hz: float = 100.0
+    clock_rate_hz: float = DEFAULT_CLOCK_RATE_HZ
     topics: tuple[str, ...] = ()
     loop: bool = False
     wait_for_subscribers_s: float = 0.0
@@ -263,7 +265,8 @@ def _rosbags_source(reader: Reader, topics: Collection[str], bag: Path) -> BagSo
 
 def _check(source: BagSource, options: PlayOptions) -> None:
     """Refuse topics the bag does not have and a loop over nothing (usage errors), and a
-    damaged bag with nothing before its damage (:class:`PlayError`)."""
+    bag with no message on the topics to play, or a damaged one with none before its damage
+    (:class:`PlayError`)."""
     unknown = sorted(set(options.topics) - source.types.keys())
     available = ", ".join(sorted(source.types)) or "none"
     if unknown and source.damage is not None:
@@ -277,6 +280,9 @@ def _check(source: BagSource, options: PlayOptions) -> None:
         raise PlayError(f"nothing to play before the damage of the bag: {source.damage}")
     if options.loop and not any(source.counts.values()):  # it would spin on nothing
         raise PlayInputError("nothing to loop: the bag has no messages on the topics to play")
+    if not any(source.counts.values()):
+        asked = ", ".join(options.topics) or "any topic"
+        raise PlayError(f"nothing to play: no message on {asked} in the bag; it has {available}")
 
 
 def play(

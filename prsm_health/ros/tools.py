@@ -13,29 +13,42 @@ import sys
 from pathlib import Path
 from typing import TypeVar
 
+from prsm_health.interrupt import EXIT_INTERRUPTED
+
 Parser = TypeVar("Parser", bound=argparse.ArgumentParser)
 #: The scene bag ``make demo`` plays (made by ``prsm-health simulate``, see bags/).
 DEMO_BAG = Path("bags", "sudden-jam")
 
 
+def _number(text: str) -> float:
+    """``text`` as a float, NaN if it is not a number (which the types below refuse)."""
+    try:
+        return float(text)
+    except ValueError:
+        return math.nan
+
+
 def _positive(text: str) -> float:
-    value = float(text)
+    value = _number(text)
     if not (math.isfinite(value) and value > 0.0):
         raise argparse.ArgumentTypeError(f"must be a finite number > 0, got {text!r}")
     return value
 
 
 def _non_negative(text: str) -> float:
-    value = float(text)
+    value = _number(text)
     if not (math.isfinite(value) and value >= 0.0):
         raise argparse.ArgumentTypeError(f"must be a finite number >= 0, got {text!r}")
     return value
 
 
 def _count(text: str) -> int:
-    value = int(text)
+    try:
+        value = int(text)
+    except ValueError:
+        value = -1  # refused below, with the same message
     if value < 0:
-        raise argparse.ArgumentTypeError(f"must be >= 0, got {text!r}")
+        raise argparse.ArgumentTypeError(f"must be an integer >= 0, got {text!r}")
     return value
 
 
@@ -50,7 +63,12 @@ def add_ros_commands(commands: argparse._SubParsersAction[Parser]) -> None:
     )
     play.add_argument("--rate", type=_positive, default=1.0, help="speed factor (default 1)")
     play.add_argument("--clock", action="store_true", help="publish /clock (bag log time)")
-    play.add_argument("--clock-rate", type=_positive, default=100.0, metavar="HZ")
+    play.add_argument(
+        "--clock-rate",
+        type=_positive,
+        metavar="HZ",
+        help="/clock messages per second of bag time, with --clock (default 100)",
+    )
     play.add_argument("--topics", nargs="+", default=[], metavar="TOPIC", help="only these")
     play.add_argument("--loop", action="store_true", help="start again at the end")
     play.add_argument(
@@ -65,8 +83,16 @@ def add_ros_commands(commands: argparse._SubParsersAction[Parser]) -> None:
     monitor = commands.add_parser("monitor", help="live table of the node's health/diagnostics")
     monitor.add_argument("--node", default="/prsm_health", help="node name (default /prsm_health)")
     monitor.add_argument("--json", action="store_true", help="one JSON object per message")
-    monitor.add_argument("--count", type=_count, default=0, metavar="N", help="stop after N")
-    monitor.add_argument("--timeout", type=_non_negative, default=0.0, metavar="S")
+    monitor.add_argument(
+        "--count", type=_count, default=0, metavar="N", help="stop after N records (0: no limit)"
+    )
+    monitor.add_argument(
+        "--timeout",
+        type=_non_negative,
+        default=0.0,
+        metavar="S",
+        help="stop after S seconds (default 0: wait forever)",
+    )
     monitor.add_argument(
         "--hardware-id",
         metavar="ID",
@@ -80,7 +106,13 @@ def add_ros_commands(commands: argparse._SubParsersAction[Parser]) -> None:
     demo.add_argument(
         "--timeout", type=_positive, default=300.0, metavar="S", help="hard limit (default 300)"
     )
-    demo.add_argument("--workdir", type=Path, default=Path("build", "demo"), metavar="DIR")
+    demo.add_argument(
+        "--workdir",
+        type=Path,
+        default=Path("build", "demo"),
+        metavar="DIR",
+        help="for the node's parameters, state and log (default build/demo)",
+    )
     demo.set_defaults(handler=_run_demo)
 
 
@@ -89,11 +121,15 @@ def _warn_play(text: str) -> None:
 
 
 def _run_play(args: argparse.Namespace) -> int:
-    """Play the bag; 1 if the play failed, a reliable subscriber missed messages, or the bag
-    is damaged (its messages before the damage are played, the damage printed at the end)."""
+    """Play the bag; 1 if the play failed (also: nothing to play), a reliable subscriber
+    missed messages, or the bag is damaged (its messages before the damage are played, the
+    damage printed at the end); else EXIT_INTERRUPTED if stopped by SIGINT/SIGTERM. A
+    ``--clock-rate`` without ``--clock`` is a usage error."""
     from prsm_health.ros.player import (
         ACK_TIMEOUT_S,
+        DEFAULT_CLOCK_RATE_HZ,
         PlayError,
+        PlayInputError,
         PlayOptions,
         counts_text,
         open_bag,
@@ -101,15 +137,17 @@ def _run_play(args: argparse.Namespace) -> int:
     )
     from prsm_health.ros.runtime import ros_session
 
+    options = PlayOptions(
+        rate=args.rate,
+        clock=args.clock,
+        clock_rate_hz=DEFAULT_CLOCK_RATE_HZ if args.clock_rate is None else args.clock_rate,
+        topics=tuple(args.topics),
+        loop=args.loop,
+        wait_for_subscribers_s=args.wait_for_subscribers,
+    )
+    if args.clock_rate is not None and not args.clock:
+        raise PlayInputError("--clock-rate sets the rate of --clock's /clock: give --clock too")
     try:
-        options = PlayOptions(
-            rate=args.rate,
-            clock=args.clock,
-            clock_rate_hz=args.clock_rate,
-            topics=tuple(args.topics),
-            loop=args.loop,
-            wait_for_subscribers_s=args.wait_for_subscribers,
-        )
         with ros_session() as stop, open_bag(args.bag, options.topics) as source:
             report = play(source, options, stop, _warn_play)
     except PlayError as exc:
@@ -130,10 +168,15 @@ def _run_play(args: argparse.Namespace) -> int:
     damaged = report.damage is not None and not report.interrupted  # stopped before it
     if damaged:
         print(f"prsm-health play: error: played up to the damage: {report.damage}", file=sys.stderr)
-    return 1 if report.unacknowledged or damaged else 0
+    if report.unacknowledged or damaged:
+        return 1
+    return EXIT_INTERRUPTED if report.interrupted else 0
 
 
 def _run_monitor(args: argparse.Namespace) -> int:
+    """Show the node's health; 1 if it ended without what was asked (``--count`` records,
+    or, without it, anything), saying what is missing; EXIT_INTERRUPTED if stopped by
+    SIGINT/SIGTERM (the shortfall is still printed)."""
     from prsm_health.ros.monitor import Monitor, MonitorOptions
     from prsm_health.ros.runtime import ros_session
 
@@ -152,6 +195,8 @@ def _run_monitor(args: argparse.Namespace) -> int:
             monitor.close()
     if not complete:
         print(f"prsm-health monitor: {monitor.shortfall()}", file=sys.stderr)
+    if stop.is_set():
+        return EXIT_INTERRUPTED
     return 0 if complete else 1
 
 

@@ -197,6 +197,12 @@ def test_writer_errors_name_the_bag(tmp_path: Path) -> None:
         BagWriter(tmp_path / "exists"),
     ):
         pass
+    # A name of an MCAP file made a directory holding out.mcap/out.mcap.mcap.
+    with pytest.raises(
+        BagError, match=rf"out.mcap: a bag is written as a directory .* {tmp_path / 'out'}$"
+    ):
+        BagWriter(tmp_path / "out.mcap")
+    assert not (tmp_path / "out.mcap").exists()
     bag = tmp_path / "bag"
     with BagWriter(bag) as writer:
         writer.add_topic("/m", MOTOR_STATE)

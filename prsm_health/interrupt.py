@@ -1,0 +1,29 @@
+"""Ctrl-C as a request to stop, for the commands that end with what they have done so far.
+
+``simulate`` closes a complete, shorter bag and ``replay`` reports what it read: both end
+their loop when :func:`stop_on_interrupt`'s event is set instead of being torn down by
+KeyboardInterrupt in the middle of a write, and exit with :data:`EXIT_INTERRUPTED`, as do
+``play`` and ``monitor`` (whose ROS session turns SIGINT and SIGTERM into its stop event:
+:func:`prsm_health.ros.runtime.ros_session`).
+"""
+
+from __future__ import annotations
+
+import signal
+import threading
+from collections.abc import Iterator
+from contextlib import contextmanager
+
+#: Exit code of a command stopped by Ctrl-C (128 + SIGINT, as a shell reports it).
+EXIT_INTERRUPTED = 130
+
+
+@contextmanager
+def stop_on_interrupt() -> Iterator[threading.Event]:
+    """An event that SIGINT sets while the block runs (the previous handler restored after)."""
+    stop = threading.Event()
+    previous = signal.signal(signal.SIGINT, lambda _signal, _frame: stop.set())
+    try:
+        yield stop
+    finally:
+        signal.signal(signal.SIGINT, previous)
