@@ -280,6 +280,12 @@ def _run_simulate(args: argparse.Namespace) -> int:
         overrides["truth_rate_hz"] = args.rate / math.ceil(args.rate / scene.truth_rate_hz)
     scene = dataclasses.replace(scene, **{k: v for k, v in overrides.items() if v is not None})
     _check_room(scene.samples, joint_states=scene.joint_states, out=args.out)
+    if late := [f"{jam.time_s:g} s" for jam in scene.jams if jam.time_s >= scene.duration_s]:
+        print(
+            f"note: the jam(s) at {', '.join(late)} come after the end of the run "
+            f"({scene.duration_s:g} s): not simulated",
+            file=sys.stderr,
+        )
     if args.out.exists() or args.out.is_symlink():
         if not args.force:
             raise ValueError(f"{args.out} exists (use --force to replace a bag)")

@@ -261,6 +261,12 @@ def summary(bag: Path, source: str, result: ReplayResult) -> str:
         delays = ", ".join(
             "never" if j.delay_s is None else f"{j.delay_s:.2f} s" for j in metrics.jams
         )
+        jams = f"{len(metrics.jams)} (identified after {delays})" if metrics.jams else "none"
+        loss = (
+            f"precision loss error {metrics.precision_loss_error_percent:.1f} %"
+            if math.isfinite(metrics.precision_loss_error_percent)
+            else "no precision loss in the truth to compare"
+        )
         load = (
             f"load RMSE {metrics.load_rmse_percent_rated:.2f} % of rated "
             f"(max {metrics.load_max_error_n:.0f} N), NEES {metrics.load_nees_mean:.2f} "
@@ -270,9 +276,7 @@ def summary(bag: Path, source: str, result: ReplayResult) -> str:
         )
         lines += [
             f"  vs truth: {load}",
-            f"  jams: {len(metrics.jams)} (identified after {delays or '-'}), false "
-            f"declarations {metrics.false_jam_declarations}; precision loss error "
-            f"{metrics.precision_loss_error_percent:.1f} %, 2-sigma coverage "
-            f"{100 * metrics.precision_loss_coverage_2sigma:.0f} %",
+            f"  jams: {jams}, false declarations {metrics.false_jam_declarations}; {loss}, "
+            f"2-sigma coverage {100 * metrics.precision_loss_coverage_2sigma:.0f} %",
         ]
     return "\n".join(lines)

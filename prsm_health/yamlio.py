@@ -88,7 +88,8 @@ def _parse_error(path: Path, exc: yaml.YAMLError) -> str:
 
 
 def load_yaml_mapping(path: Path) -> dict[str, Any]:
-    """Parse ``path`` (UTF-8 text) and return its top-level mapping."""
+    """Parse ``path`` (UTF-8 text) and return its top-level mapping; an empty document (no
+    text, or only comments) is the empty mapping, every key left to its default."""
     try:
         text = path.read_text(encoding="utf-8")
     except OSError as exc:
@@ -107,6 +108,8 @@ def load_yaml_mapping(path: Path) -> dict[str, Any]:
         raise YamlError(f"{path}: {exc}") from exc
     except RecursionError as exc:  # the parser recurses per level of nesting
         raise YamlError(f"{path}: nested too deeply") from exc
+    if data is None:
+        return {}
     if not isinstance(data, dict):
-        raise YamlError(f"{path} does not hold a mapping")
+        raise YamlError(f"{path} does not hold a mapping (it holds a {type(data).__name__})")
     return data

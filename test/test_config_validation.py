@@ -79,6 +79,15 @@ def test_a_mapping_may_override_what_it_merges(tmp_path: Path) -> None:
     assert _load(tmp_path, text)["x"] == {"a": 2, "c": 3}
 
 
+def test_an_empty_file_is_the_empty_mapping(tmp_path: Path) -> None:
+    """Every key left to its default; it was refused as "does not hold a mapping", which sent
+    a user hunting for a syntax error in a file of comments."""
+    path = tmp_path / "params.yaml"
+    for text in ("", "# every value left to its default\n"):
+        path.write_text(text)
+        assert load_yaml_mapping(path) == {}
+
+
 @pytest.mark.parametrize(
     ("content", "message"),
     [
@@ -88,7 +97,7 @@ def test_a_mapping_may_override_what_it_merges(tmp_path: Path) -> None:
             r"data\.yaml, line 2, column 2: while parsing a flow sequence, expected",
         ),
         (b"a: 1" + b"1" * 5000 + b"\n", r"data\.yaml: Exceeds the limit \(4300 digits\)"),
-        (b"- 1\n", r"data\.yaml does not hold a mapping"),
+        (b"- 1\n", r"data\.yaml does not hold a mapping \(it holds a list\)"),
     ],
 )
 def test_unreadable_files_are_one_line_naming_the_file(

@@ -175,6 +175,19 @@ def test_simulate_at_a_low_rate_lowers_the_truth_rate(tmp_path: Path) -> None:
         assert len(read_truth(out)) == 2 * truth_hz
 
 
+def test_simulate_says_which_jams_a_shortened_run_leaves_out(
+    tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    """sudden-jam's jams at 4.5 s and 25 s: a 10 s run has the first only, and says so (a
+    --duration or a scene file that put a jam beyond the end left it out without a word)."""
+    argv = ["simulate", "--scene", "sudden-jam", "--duration", "10", "--rate", "100"]
+    assert main([*argv, "--out", str(tmp_path / "short")]) == 0
+    note = "note: the jam(s) at 25 s come after the end of the run (10 s): not simulated\n"
+    assert capsys.readouterr().err.endswith(note)
+    truth = read_truth(tmp_path / "short")
+    assert truth is not None and int(truth.jammed_rollers.max()) == 1
+
+
 def test_ctrl_c_during_simulate_leaves_a_complete_shorter_bag(tmp_path: Path) -> None:
     """SIGINT to a real ``prsm-health simulate`` process: it stops after the chunk being
     written, closes the bag (metadata.yaml, a readable MCAP) and exits 130 without a traceback."""
