@@ -64,7 +64,9 @@ def bag_duration_s(bag: Path) -> float:
             return float(reader.duration) / 1e9
     except (ReaderError, OSError) as exc:
         raise DemoError(
-            f"cannot open the bag {bag} ({exc}); the scene bags are made by prsm-health simulate"
+            f"cannot open the bag {bag} ({exc}); the demo plays intact bags (the scene bags are "
+            "made by prsm-health simulate); prsm-health replay and play read a damaged one up "
+            "to its damage"
         ) from exc
 
 

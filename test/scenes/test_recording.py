@@ -13,7 +13,7 @@ import yaml
 from prsm_health.bags.bagfiles import custom_data
 from prsm_health.cli import main
 from prsm_health.physics.errors import ParameterError
-from prsm_health.ros.demo import demo_params
+from prsm_health.ros.demo import DemoError, bag_duration_s, demo_params
 from prsm_health.scenes.recording import ACTUATOR_KEY, SCENE_KEY, bag_actuator, bundled_scene_of
 from prsm_health.scenes.scene import load_scene
 
@@ -88,6 +88,14 @@ def test_the_demo_gives_the_node_the_recorded_actuator(renamed: Path, tmp_path: 
     params = yaml.safe_load(path.read_text())
     assert params["actuator"] == {"preset": "dong2022-downhole", "wear_acceleration": 1.0e5}
     assert line.endswith("the actuator of scene sudden-jam (recorded in the bag), wear x 100000")
+
+
+def test_the_demo_names_the_commands_that_read_a_damaged_bag(renamed: Path, tmp_path: Path) -> None:
+    cut = tmp_path / "cut.mcap"
+    cut.write_bytes((renamed / "mission-7.mcap").read_bytes()[:50_000])
+    with pytest.raises(DemoError, match="replay and play read a damaged one up to its damage"):
+        bag_duration_s(cut)
+    assert bag_duration_s(renamed) == pytest.approx(5.0, abs=0.01)
 
 
 def test_an_invalid_recorded_actuator_names_the_bag_and_the_field(
