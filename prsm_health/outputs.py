@@ -23,7 +23,7 @@ import enum
 import math
 from collections import Counter
 from collections.abc import Mapping
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from typing import Any
 
 from prsm_health.estimation.estimate import S_PER_H, UM_PER_M, HealthState
@@ -40,15 +40,13 @@ FATIGUE = "prsm_health: fatigue"
 INPUT_HEALTH = "prsm_health: input health"
 FILTER_CONSISTENCY = "prsm_health: filter consistency"
 PERSISTENCE = "prsm_health: persistence"
+CONFIGURATION = "prsm_health: configuration"
+#: The diagnostics' hardware_id when none is given (the node's parameter, replay's option).
+DEFAULT_HARDWARE_ID = "prsm_actuator"
+#: The statuses of the estimate itself (the rest are about the inputs and the filter).
+ESTIMATE_STATUS_NAMES = (AXIAL_LOAD, JAMMED_ROLLERS, PRECISION_LOSS, FATIGUE)
 #: The estimator statuses, in the order :func:`diagnostic_statuses` returns them.
-STATUS_NAMES = (
-    AXIAL_LOAD,
-    JAMMED_ROLLERS,
-    PRECISION_LOSS,
-    FATIGUE,
-    INPUT_HEALTH,
-    FILTER_CONSISTENCY,
-)
+STATUS_NAMES = (*ESTIMATE_STATUS_NAMES, INPUT_HEALTH, FILTER_CONSISTENCY)
 
 #: Float fields of ``HealthEstimate`` that are standard deviations or values (all replaced by
 #: 0.0 when non-finite; see :func:`health_estimate_fields`).
@@ -354,7 +352,7 @@ def diagnostic_statuses(
     fields: dict[str, Any] | None = None
     parts: list[tuple[str, _Part]]
     if state is None:
-        parts = [(name, (Level.OK, "no estimate yet", [])) for name in STATUS_NAMES[:4]]
+        parts = [(name, (Level.OK, "no estimate yet", [])) for name in ESTIMATE_STATUS_NAMES]
     else:
         fields = health_estimate_fields(state)
         # Each estimator status says which estimate it reports (the sensor's stamp of its
@@ -408,3 +406,27 @@ def persistence_status(
     if health.kept_corrupt is not None:
         values.append(("kept_corrupt", health.kept_corrupt))
     return DiagnosticStatusData(PERSISTENCE, level, message, hardware_id, values)
+
+
+def restored_statuses(
+    statuses: list[DiagnosticStatusData], stamp_s: float
+) -> list[DiagnosticStatusData]:
+    """``statuses`` of an estimate restored with the state file, not made in this run (the
+    node's, until its first new one), marked as such: the message of each estimate status ends
+    with ``(restored, estimate at sensor time 1009.980 s)``, ``stamp_s`` being the estimate's
+    stamp. Levels and values are unchanged: STALE until input comes (``stale: no input yet;
+    last: 2 jammed rollers (p = 1.00) (restored, ...)``), then the estimate's own."""
+    marker = f" (restored, estimate at sensor time {stamp_s:.3f} s)"
+    return [
+        replace(s, message=s.message + marker) if s.name in ESTIMATE_STATUS_NAMES else s
+        for s in statuses
+    ]
+
+
+def configuration_status(reason: str, hardware_id: str) -> DiagnosticStatusData:
+    """The status of a node whose configure failed (``reason``: the problem, as its log line
+    says it): ERROR, so that a monitor or dashboard shows why the node publishes nothing else
+    (it stays unconfigured until the parameters are fixed and configure is called again)."""
+    return DiagnosticStatusData(
+        CONFIGURATION, Level.ERROR, f"configure failed: {reason}", hardware_id, []
+    )

@@ -49,7 +49,7 @@ from prsm_health.estimation.estimator import HealthEstimator
 from prsm_health.estimation.inputs import InputCounters
 from prsm_health.estimation.metrics import Metrics, score
 from prsm_health.estimation.params import EstimatorParams
-from prsm_health.outputs import DiagnosticStatusData, health_estimate_fields
+from prsm_health.outputs import DEFAULT_HARDWARE_ID, DiagnosticStatusData, health_estimate_fields
 from prsm_health.signals import MotorSamples, TruthSamples
 from prsm_health.tracking import DiagnosticsTracker, rejected_by_reason
 
@@ -97,7 +97,7 @@ def replay(
     *,
     topics: InputTopics | None = None,
     out: Path | None = None,
-    hardware_id: str = "prsm_health",
+    hardware_id: str = DEFAULT_HARDWARE_ID,
     progress: Callable[[int], None] | None = None,
     stop: threading.Event | None = None,
 ) -> ReplayResult:

@@ -30,6 +30,7 @@ from prsm_health.estimation.estimate import UM_PER_M
 from prsm_health.estimation.inputs import RejectReason
 from prsm_health.estimation.params import EstimatorParams, bundled_params_file, params_from_mapping
 from prsm_health.interrupt import EXIT_INTERRUPTED, stop_on_interrupt
+from prsm_health.outputs import DEFAULT_HARDWARE_ID
 from prsm_health.replay import ReplayResult, replay
 from prsm_health.scenes.recording import bag_actuator, scene_actuator
 from prsm_health.yamlio import YamlError, load_yaml_mapping
@@ -77,7 +78,12 @@ def add_replay_command(commands: Any) -> None:
         choices=("current", "torque"),
         help="what JointState.effort carries (default current)",
     )
-    parser.add_argument("--hardware-id", default="prsm_health", metavar="ID")
+    parser.add_argument(
+        "--hardware-id",
+        default=DEFAULT_HARDWARE_ID,
+        metavar="ID",
+        help=f"the diagnostics' hardware_id in --out (default {DEFAULT_HARDWARE_ID}, the node's)",
+    )
     parser.set_defaults(handler=run_replay)
 
 

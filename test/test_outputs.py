@@ -12,6 +12,7 @@ from prsm_health.estimation.estimate import EstimateEvent, HealthState
 from prsm_health.estimation.params import DiagnosticThresholds
 from prsm_health.outputs import (
     AXIAL_LOAD,
+    CONFIGURATION,
     FATIGUE,
     FILTER_CONSISTENCY,
     INPUT_HEALTH,
@@ -23,9 +24,11 @@ from prsm_health.outputs import (
     InputHealth,
     Level,
     PersistenceHealth,
+    configuration_status,
     diagnostic_statuses,
     health_estimate_fields,
     persistence_status,
+    restored_statuses,
 )
 
 RATED_N = 55_000.0
@@ -235,3 +238,32 @@ def test_persistence_status() -> None:
     assert ("last_save_age_s", "4") in persistence_status(saved, "left", NOW).values
     later = dataclasses.replace(saved, last_save_s=NOW + 30.0)  # the clock went back
     assert ("last_save_age_s", "0") in persistence_status(later, "left", NOW).values
+
+
+def test_restored_statuses_say_so() -> None:
+    """A restored jam stays what it is (STALE until input comes, its level after), named with
+    the sensor time of its estimate."""
+    jammed = state(jam_probabilities=(0.0, 0.0, 1.0))
+    never = inputs(last_sample_s=None)
+    plain = diagnostic_statuses(jammed, never, DiagnosticThresholds(), RATED_N, "left", NOW)
+    marked = {s.name: s for s in restored_statuses(plain, jammed.stamp_s)}
+    jam = marked[JAMMED_ROLLERS]
+    assert jam.level == Level.STALE
+    assert jam.message == (
+        "stale: no input yet; last: 2 jammed rollers (p = 1.00)"
+        " (restored, estimate at sensor time 99.900 s)"
+    )
+    assert ("estimate_stamp_s", "99.900") in jam.values
+    for before in plain:
+        after = marked[before.name]
+        assert (after.level, after.values) == (before.level, before.values)
+        restored = after.message.endswith("(restored, estimate at sensor time 99.900 s)")
+        assert restored == (before.name in STATUS_NAMES[:4])
+    live = diagnostic_statuses(jammed, inputs(), DiagnosticThresholds(), RATED_N, "left", NOW)
+    assert restored_statuses(live, jammed.stamp_s)[1].level == Level.ERROR  # input came
+
+
+def test_configuration_status() -> None:
+    status = configuration_status("parameter input_type: must be one of a, b", "left")
+    assert (status.name, status.level, status.hardware_id) == (CONFIGURATION, Level.ERROR, "left")
+    assert status.message == "configure failed: parameter input_type: must be one of a, b"

@@ -29,6 +29,7 @@ from prsm_health.estimation.estimate import EstimateEvent
 from prsm_health.estimation.params import EstimatorParams
 from prsm_health.replay import ReplayResult, replay
 from prsm_health.report import _band, _load_figure, _series, plt
+from prsm_health.ros.parameters import SPECS
 from prsm_health.scenes.recording import record
 from prsm_health.scenes.scene import load_scene, scene_from_mapping
 from prsm_health.scenes.simulator import Simulator
@@ -96,6 +97,15 @@ def test_replay_estimates_scores_and_writes_what_the_node_publishes(
     # The embedded schemas let the mcap reader decode everything too.
     decoded = list(read_ros2_messages(out / "out.mcap"))
     assert len(decoded) == sum(counts.values())
+    # Under the node's default hardware_id, so that one monitor --hardware-id reads both
+    # (the replay's was "prsm_health").
+    hardware_ids = {
+        status.hardware_id
+        for message in decoded
+        if message.channel.topic == DIAGNOSTICS_TOPIC
+        for status in message.ros_msg.status
+    }
+    assert hardware_ids == {SPECS["hardware_id"].default}
 
 
 def test_joint_state_input_gives_the_same_estimates(bag: Path) -> None:

@@ -15,6 +15,10 @@ until it answers, unless ``MonitorOptions.hardware_id`` names it (once: the node
 configure and refuses a change while configured); statuses that come before the answer are
 kept, the latest of each hardware id, and the node's shown once it is known.
 
+A node whose configure failed publishes only its configuration status (ERROR, with the
+reason): the table's first line then says the node is not configured, instead of waiting for an
+estimate that will not come.
+
 Messages from other publishers (``ros2 topic pub``, other tools) are shown as they are, never
 refused: a level that is none of the four is ``level 7 (unknown)``, an estimate without the
 probability of its jam count says so.
@@ -40,7 +44,7 @@ from rclpy.qos import QoSProfile, QoSReliabilityPolicy
 from rclpy.validate_full_topic_name import validate_full_topic_name
 
 from prsm_health.jsonvalues import json_safe
-from prsm_health.outputs import Level
+from prsm_health.outputs import CONFIGURATION, Level
 from prsm_health.ros.messages import stamp_seconds
 
 STATUS_PREFIX = "prsm_health: "
@@ -49,6 +53,9 @@ CLEAR = "\x1b[H\x1b[J"
 NO_ESTIMATE = (
     "no estimate received since the monitor started (the node publishes one per new estimate)"
 )
+#: The first line instead while the node reports a failed configure (an older estimate is no
+#: longer the node's).
+NOT_CONFIGURED = "the node is not configured: it makes no estimate until a configure succeeds"
 #: How often the node is asked for its hardware_id until it answers [s]: a request sent as its
 #: service appears may be lost.
 ASK_PERIOD_S = 1.0
@@ -158,8 +165,12 @@ def health_line(record: dict[str, Any]) -> str:
 
 
 def table(health: dict[str, Any] | None, diagnostics: dict[str, Any]) -> str:
-    """The compact block: the estimate, then level, short name and message of each status."""
-    lines = [health_line(health) if health else NO_ESTIMATE]
+    """The compact block: the estimate (or that the node is not configured), then level,
+    short name and message of each status."""
+    if any(s["name"] == CONFIGURATION for s in diagnostics["status"]):
+        lines = [NOT_CONFIGURED]
+    else:
+        lines = [health_line(health) if health else NO_ESTIMATE]
     for status in diagnostics["status"]:
         name = status["name"].removeprefix(STATUS_PREFIX)
         lines.append(f"  {status['level']:<5} {name:<18} {status['message']}")

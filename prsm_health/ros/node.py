@@ -12,7 +12,10 @@ configure.
 
 Lifecycle: configure (validate parameters, build the estimator, restore the state, create the
 publishers), activate (subscribe, start the timers, publish), deactivate (process what was
-received, save, stop: an inactive node publishes nothing), cleanup, shutdown (save).
+received, save, stop: an inactive node publishes nothing), cleanup, shutdown (save). A node
+whose configure failed stays unconfigured (its parameters can be fixed and configure called
+again) and says why on ``/diagnostics`` until a configure succeeds. Until its first new
+estimate, the diagnostics report the last estimate restored with the state, marked as such.
 ``autostart`` (default true) configures and activates at start. The node never crashes on
 input: every callback catches its exceptions, counts them (filter-consistency status) and
 logs at most once per second; non-finite outputs are replaced and counted.
@@ -55,9 +58,12 @@ from sensor_msgs.msg import JointState
 from prsm_health.estimation.estimate import HealthState
 from prsm_health.estimation.estimator import HealthEstimator
 from prsm_health.outputs import (
+    DiagnosticStatusData,
     PersistenceHealth,
+    configuration_status,
     health_estimate_fields,
     persistence_status,
+    restored_statuses,
 )
 from prsm_health.ros.messages import (
     JOINT_PROBLEMS,
@@ -83,7 +89,10 @@ NS_PER_S = 1e9
 #: Estimates kept for reliable subscribers: 20 s at 50 Hz (a replay at twice the speed), longer
 #: than Fast DDS takes to repair a lost message (its 3 s heartbeat), so none is overwritten first.
 HEALTH_QOS_DEPTH = 1000
-DIAGNOSTICS_QOS_DEPTH = 10
+DIAGNOSTICS_QOS = QoSProfile(depth=10, reliability=QoSReliabilityPolicy.RELIABLE)
+#: How often a node whose configure failed says so on /diagnostics (steady clock: also
+#: while a sim-time /clock does not run) [s].
+CONFIGURE_FAILED_PERIOD_S = 1.0
 #: How often the main loop returns to Python to see a SIGINT/SIGTERM [s].
 SPIN_TIMEOUT_S = 0.1
 
@@ -148,6 +157,14 @@ class HealthNode(LifecycleNode):
         self._reset_service: Any = None
         self._subscription: Any = None
         self._timers: list[Any] = []
+        # Why the last configure failed, and its own /diagnostics publisher and timer (the
+        # lifecycle publisher exists only once configured); None after a successful one.
+        self._configure_failure: DiagnosticStatusData | None = None
+        self._configure_failure_pub: Any = None
+        self._configure_failure_timer: Any = None
+        self._latest: HealthState | None = None  # the newest estimate
+        # The estimate restored with the state file while no new one came (else None).
+        self._restored: HealthState | None = None
         self.finalized = False  # shut down (rclpy refuses a second shutdown transition)
         self._reset_run_state()
 
@@ -239,27 +256,62 @@ class HealthNode(LifecycleNode):
             self.trigger_activate()
 
     def on_configure(self, state: LifecycleState) -> TransitionCallbackReturn:
+        values = self._parameter_values()
         try:
-            config = node_config(self._parameter_values(), self._declare_errors)
+            config = node_config(values, self._declare_errors)
         except ConfigError as exc:
-            self.get_logger().error(f"configure failed: {exc}")
-            return TransitionCallbackReturn.FAILURE
+            hardware_id = values["hardware_id"]
+            if "hardware_id" in exc.problems:
+                hardware_id = SPECS["hardware_id"].default
+            return self._configure_failed(str(exc), str(hardware_id))
         try:
             topic = self.resolve_topic_name(config.input_topic)
         except Exception as exc:  # the expanded name is checked by rcl only
-            self.get_logger().error(f"configure failed: parameter input_topic: {exc}")
-            return TransitionCallbackReturn.FAILURE
+            return self._configure_failed(f"parameter input_topic: {exc}", config.hardware_id)
         try:
             self._configure(config)
         except Exception as exc:
-            self.get_logger().error(f"configure failed: {exc!r}")
             self._release()
-            return TransitionCallbackReturn.FAILURE
+            return self._configure_failed(repr(exc), config.hardware_id)
+        self._end_configure_failure()
         self.get_logger().info(
             f"configured: {config.hardware_id}, preset {config.estimator.actuator.preset.name},"
             f" input {config.input_type} on {topic}"
         )
         return TransitionCallbackReturn.SUCCESS
+
+    def _configure_failed(self, reason: str, hardware_id: str) -> TransitionCallbackReturn:
+        """Log why configure failed and report it on /diagnostics every
+        :data:`CONFIGURE_FAILED_PERIOD_S` until a configure succeeds: the node stays
+        unconfigured and publishes nothing else, so that without this a monitor could not
+        tell it from a node that is not running. ``hardware_id``: the parameter's, or the
+        default when that is not valid."""
+        self.get_logger().error(f"configure failed: {reason}")
+        self._configure_failure = configuration_status(reason, hardware_id)
+        if self._configure_failure_timer is None:
+            self._configure_failure_pub = self.create_publisher(
+                DiagnosticArray, "/diagnostics", DIAGNOSTICS_QOS
+            )
+            self._configure_failure_timer = self.create_timer(
+                CONFIGURE_FAILED_PERIOD_S, self._on_configure_failure, clock=self._steady
+            )
+        return TransitionCallbackReturn.FAILURE
+
+    def _on_configure_failure(self) -> None:
+        try:
+            if self._configure_failure is not None:
+                array = diagnostic_array([self._configure_failure], self._now_s())
+                self._configure_failure_pub.publish(array)
+        except Exception as exc:
+            self._fault("diagnostics", exc)
+
+    def _end_configure_failure(self) -> None:
+        """Stop reporting a failed configure (one succeeded, or the node shuts down)."""
+        if self._configure_failure_timer is not None:
+            self.destroy_timer(self._configure_failure_timer)
+            self.destroy_publisher(self._configure_failure_pub)
+        self._configure_failure = None
+        self._configure_failure_pub = self._configure_failure_timer = None
 
     def _configure(self, config: NodeConfig) -> None:
         self._reset_run_state()
@@ -281,6 +333,9 @@ class HealthNode(LifecycleNode):
             )
         elif outcome.restored:
             self.get_logger().info(f"resumed from {config.state_file}")
+            # The diagnostics report it until the first new estimate (it is not published on
+            # ~/health: it is no new estimate).
+            self._latest = self._restored = outcome.last_estimate
         else:
             self.get_logger().info(f"no state file at {config.state_file}: starting fresh")
         self._config, self._estimator, self._store = config, estimator, store
@@ -291,11 +346,8 @@ class HealthNode(LifecycleNode):
         self._health_pub = self.create_lifecycle_publisher(
             HealthEstimate, "~/health", HEALTH_QOS_DEPTH
         )
-        reliable = QoSProfile(
-            depth=DIAGNOSTICS_QOS_DEPTH, reliability=QoSReliabilityPolicy.RELIABLE
-        )
         self._diagnostics_pub = self.create_lifecycle_publisher(
-            DiagnosticArray, "/diagnostics", reliable
+            DiagnosticArray, "/diagnostics", DIAGNOSTICS_QOS
         )
         self._reset_service = self.create_service(
             ResetAfterMaintenance, "~/reset_after_maintenance", self._on_reset
@@ -342,6 +394,7 @@ class HealthNode(LifecycleNode):
     def on_shutdown(self, state: LifecycleState) -> TransitionCallbackReturn:
         self._stop()
         self._release()
+        self._end_configure_failure()
         self.finalized = True
         return TransitionCallbackReturn.SUCCESS
 
@@ -378,7 +431,7 @@ class HealthNode(LifecycleNode):
         self._pending = _Pending()
         self._node_rejects: Counter[str] = Counter()
         self._tracker = DiagnosticsTracker()
-        self._latest: HealthState | None = None
+        self._latest = self._restored = None
         self._latest_published = True
         self._frame_id = ""
         self._saved_at_samples = -1
@@ -452,6 +505,7 @@ class HealthNode(LifecycleNode):
         self._tracker.events.observe(now, states, counters)
         if states:
             self._latest = states[-1]
+            self._restored = None
             self._latest_published = False
             if config.health_rate_hz == 0.0:
                 for state in states:
@@ -480,6 +534,8 @@ class HealthNode(LifecycleNode):
             statuses = self._tracker.statuses(
                 self._latest, config.estimator, config.hardware_id, now
             )
+            if self._restored is not None:
+                statuses = restored_statuses(statuses, self._restored.stamp_s)
             statuses.append(persistence_status(self._persistence, config.hardware_id, now))
             self._diagnostics_pub.publish(diagnostic_array(statuses, now))
         except Exception as exc:
@@ -504,6 +560,8 @@ class HealthNode(LifecycleNode):
             )
             reset_state = estimator.current_state()  # None before the first estimate
             after = [reset_state] if reset_state is not None else []
+            if reset_state is None:  # a restored estimate no longer holds
+                self._latest = self._restored = None
             self._handle_estimates(estimator, config, before + after, 0)
             reset = [f"jammed rollers {request.jammed_rollers}"]
             reset += ["precision loss 0"] if request.reset_precision_loss else []
@@ -536,7 +594,7 @@ class HealthNode(LifecycleNode):
         if samples == self._saved_at_samples:
             return
         try:
-            store.save(estimator)
+            store.save(estimator, self._latest)
         except (OSError, ValueError) as exc:  # ValueError: a value JSON cannot hold
             self._persistence = dataclasses.replace(self._persistence, save_error=str(exc))
             self.get_logger().error(f"cannot save the state: {exc}", throttle_duration_sec=1.0)
@@ -557,6 +615,9 @@ def main(argv: Sequence[str] | None = None) -> int:
         extra = remove_ros_args(args)[1:]
     except _rclpy.RCLError as exc:  # malformed --ros-args (rcl's message spans several lines)
         print(f"prsm-health-node: invalid --ros-args: {str(exc).splitlines()[0]}", file=sys.stderr)
+        return 2
+    except _rclpy.UnknownROSArgsError as exc:  # e.g. --ros-args --garbage; str: the list
+        print(f"prsm-health-node: invalid --ros-args: unknown ROS arguments {exc}", file=sys.stderr)
         return 2
     if extra:
         print(

@@ -25,6 +25,7 @@ from rclpy.exceptions import InvalidTopicNameException
 from rclpy.validate_topic_name import validate_topic_name
 
 from prsm_health.estimation.params import EstimatorParams, params_from_mapping
+from prsm_health.outputs import DEFAULT_HARDWARE_ID
 from prsm_health.physics.errors import PhysicsError
 from prsm_health.ros.persistence import default_state_file
 from prsm_health.yamlio import YamlError, load_yaml_mapping
@@ -83,7 +84,7 @@ PARAMETERS: tuple[ParameterSpec, ...] = (
     ParameterSpec("preset", "", "PRSM preset name or YAML path; overrides actuator.preset"),
     ParameterSpec(
         "hardware_id",
-        "prsm_actuator",
+        DEFAULT_HARDWARE_ID,
         "actuator id: diagnostics hardware_id and state file name ([A-Za-z0-9_.-]+)",
     ),
     ParameterSpec(

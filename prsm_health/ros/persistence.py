@@ -3,21 +3,30 @@
 A state file is JSON::
 
     {"format": "prsm_health.state/1", "hardware_id": "...", "saved_unix_s": 1.7e9,
-     "estimator": {...HealthEstimator.snapshot()...}}
+     "estimator": {...HealthEstimator.snapshot()...},
+     "last_estimate": {...the HealthState fields...} or null}
+
+``last_estimate`` is the node's latest estimate at the save (null before the first, and in
+files saved before it existed): the snapshot holds no estimate, and a restarted node shows
+this one in its diagnostics until it makes a new one, so that a known jam does not turn into
+"no estimate yet" by a restart.
 
 Saving is atomic: the text goes to a temporary file in the same directory, which is flushed,
 fsync'ed and renamed over the state file; then the directory is fsync'ed, so after a crash or
 power loss the file is either the old or the new state, never a mix.
 
 Restoring: a missing file means a fresh start. A file that cannot be used (not JSON, not this
-format, another hardware_id, or refused by :meth:`HealthEstimator.restore`: malformed, or
-another actuator's geometry) is moved aside to ``<name>.corrupt-<UTC time>`` and reported;
-the estimator then starts fresh. A bad file is therefore never silently replaced by zeros.
+format, another hardware_id, a malformed last estimate, or refused by
+:meth:`HealthEstimator.restore`: malformed, or another actuator's geometry) is moved aside to
+``<name>.corrupt-<UTC time>`` and reported; the estimator then starts fresh. A bad file is
+therefore never silently replaced by zeros.
 """
 
 from __future__ import annotations
 
+import dataclasses
 import json
+import math
 import os
 import tempfile
 import time
@@ -25,6 +34,7 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
+from prsm_health.estimation.estimate import EstimateEvent, HealthState
 from prsm_health.estimation.estimator import HealthEstimator, SnapshotError
 
 FORMAT = "prsm_health.state/1"
@@ -38,11 +48,13 @@ def default_state_file(hardware_id: str) -> Path:
 
 @dataclass(frozen=True)
 class RestoreOutcome:
-    """What :meth:`StateStore.restore` did: resumed, started fresh, or kept a bad file aside."""
+    """What :meth:`StateStore.restore` did: resumed (with the last estimate saved, if any),
+    started fresh, or kept a bad file aside."""
 
     restored: bool
     kept_corrupt: Path | None = None
     problem: str = ""
+    last_estimate: HealthState | None = None
 
 
 class StateStore:
@@ -52,13 +64,16 @@ class StateStore:
         self.path = path
         self.hardware_id = hardware_id
 
-    def save(self, estimator: HealthEstimator) -> None:
-        """Write the estimator's snapshot atomically (raises OSError on failure)."""
+    def save(self, estimator: HealthEstimator, last_estimate: HealthState | None = None) -> None:
+        """Write the estimator's snapshot and the last estimate atomically (raises OSError on
+        failure). A last estimate with a value JSON cannot hold (not finite) is saved as
+        null: the diagnostics it is kept for are no reason to lose the state."""
         document = {
             "format": FORMAT,
             "hardware_id": self.hardware_id,
             "saved_unix_s": time.time(),
             "estimator": estimator.snapshot(),
+            "last_estimate": _estimate_document(last_estimate),
         }
         text = json.dumps(document, allow_nan=False)
         folder = self.path.parent
@@ -93,12 +108,13 @@ class StateStore:
         try:
             document = json.loads(text)
             snapshot = self._snapshot(document)
+            last_estimate = _estimate(document.get("last_estimate"))
             estimator.restore(snapshot)
         except ValueError as exc:  # JSONDecodeError and SnapshotError are ValueErrors
             return self._keep_aside(f"unusable state file {self.path}: {exc}")
         except RecursionError:  # json.loads of lists nested thousands deep
             return self._keep_aside(f"unusable state file {self.path}: nested too deeply")
-        return RestoreOutcome(restored=True)
+        return RestoreOutcome(restored=True, last_estimate=last_estimate)
 
     def _snapshot(self, document: Any) -> dict[str, Any]:
         if not isinstance(document, dict) or document.get("format") != FORMAT:
@@ -122,3 +138,46 @@ class StateStore:
             target = self.path.with_name(f"{self.path.name}.corrupt-{stamp}-{n}")
         os.replace(self.path, target)
         return RestoreOutcome(restored=False, kept_corrupt=target, problem=problem)
+
+
+def _estimate_document(state: HealthState | None) -> dict[str, Any] | None:
+    """``state``'s fields as JSON (the event as its number), or None for no estimate or one
+    with a value that is not finite."""
+    if state is None:
+        return None
+    document = {
+        **dataclasses.asdict(state),
+        "jam_probabilities": list(state.jam_probabilities),
+        "event": int(state.event),
+    }
+    return document if _finite_numbers(document) else None
+
+
+def _estimate(document: Any) -> HealthState | None:
+    """The estimate of :func:`_estimate_document` (None: none saved). Raises SnapshotError
+    unless it has exactly the fields of an estimate, each a finite number, and an event of
+    :class:`EstimateEvent`."""
+    if document is None:
+        return None
+    try:
+        state = HealthState(
+            **{
+                **document,
+                "jam_probabilities": tuple(document["jam_probabilities"]),
+                "event": EstimateEvent(document["event"]),
+            }
+        )
+    except (KeyError, TypeError, ValueError) as exc:
+        raise SnapshotError(f"malformed last estimate: {exc!r}") from exc
+    if not _finite_numbers(document):
+        raise SnapshotError("malformed last estimate: a value is not a finite number")
+    return state
+
+
+def _finite_numbers(document: dict[str, Any]) -> bool:
+    """Every value of an estimate's document, and each jam probability, is a finite number."""
+    values = [*document["jam_probabilities"]]
+    values += [v for k, v in document.items() if k != "jam_probabilities"]
+    return all(
+        isinstance(v, int | float) and not isinstance(v, bool) and math.isfinite(v) for v in values
+    )

@@ -10,7 +10,7 @@ import pytest
 from rcl_interfaces.srv import SetParametersAtomically
 from rclpy.parameter import Parameter
 
-from prsm_health.outputs import INPUT_HEALTH
+from prsm_health.outputs import CONFIGURATION, INPUT_HEALTH
 from test.ros.harness import Listener, NodeProcess, stop_process
 
 
@@ -87,6 +87,8 @@ def test_inactive_node_publishes_nothing(ros: None, tmp_path: Path) -> None:
         ) as node:
             node.wait_log("autostart is false")
             assert listener.lifecycle_state() == "unconfigured"
+            listener.spin(2.0)  # waiting is no failed configure: nothing to report
+            assert published() == 0
             # A transition the state does not have is refused; rclpy 7.1 raised out of the
             # executor and ended the node (ros2/rclpy#1209).
             assert not listener.transition("deactivate")
@@ -125,6 +127,74 @@ def test_inactive_node_publishes_nothing(ros: None, tmp_path: Path) -> None:
         listener.close()
 
 
+def _configure_failures(log: str) -> list[str]:
+    """The reasons of the node's "configure failed" log lines, in order."""
+    return [
+        line.split("configure failed: ", 1)[1]
+        for line in log.splitlines()
+        if "configure failed: " in line
+    ]
+
+
+@pytest.mark.timeout(90)
+def test_a_failed_configure_is_reported_on_diagnostics(ros: None, tmp_path: Path) -> None:
+    """A node whose configure failed published nothing: a monitor said "is the node running?".
+    It reports the failure on /diagnostics about once a second (under the default hardware_id
+    while its own is not valid), the latest reason, until a configure succeeds."""
+    typo = tmp_path / "typo.yaml"
+    typo.write_text("actuator: {preset: dong2022-downhole, wear_acceleraton: 2.0}\n")
+    listener = Listener("cfg_failed")
+
+    def failures(hardware_id: str) -> list[dict[str, object]]:
+        statuses = listener.statuses_of(hardware_id)
+        return [s[CONFIGURATION] for s in statuses if CONFIGURATION in s]
+
+    try:
+        with NodeProcess(
+            tmp_path,
+            "cfg_failed",
+            hardware_id="bad id",
+            params_file=str(typo),
+            state_file=str(tmp_path / "state.json"),
+        ) as node:
+            node.wait_log("configure failed")
+            listener.wait_for(lambda: bool(failures("prsm_actuator")), 10.0, "the failure")
+            (reason,) = _configure_failures(node.log())
+            assert reason.startswith("parameter hardware_id: must match")
+            status = failures("prsm_actuator")[-1]
+            assert status["level"] == "ERROR"
+            assert status["message"] == f"configure failed: {reason}"
+            count = len(failures("prsm_actuator"))
+            listener.spin(3.0)
+            assert 2 <= len(failures("prsm_actuator")) - count <= 4  # about once a second
+
+            assert listener.set_parameter("hardware_id", "cfg_failed") == (True, "")
+            assert not listener.transition("configure")
+            listener.wait_for(lambda: bool(failures("cfg_failed")), 10.0, "the new failure")
+            reason = _configure_failures(node.log())[-1]
+            assert "parameter params_file: " in reason and "wear_acceleraton: unknown" in reason
+            assert failures("cfg_failed")[-1]["message"] == f"configure failed: {reason}"
+
+            good = tmp_path / "good.yaml"
+            good.write_text("actuator: {preset: dong2022-downhole, wear_acceleration: 2.0}\n")
+            assert listener.set_parameter("params_file", str(good)) == (True, "")
+            assert listener.transition("configure")
+            for _ in range(10):  # what was already on the way
+                count = len(listener.diagnostics)
+                listener.spin(0.3)
+                if len(listener.diagnostics) == count:
+                    break
+            listener.spin(2.0)
+            assert len(listener.diagnostics) == count  # configured, inactive: silent
+            assert listener.transition("activate")
+            listener.wait_for(
+                lambda: INPUT_HEALTH in listener.statuses("cfg_failed"), 5.0, "diagnostics"
+            )
+            assert CONFIGURATION not in listener.statuses("cfg_failed")
+    finally:
+        listener.close()
+
+
 @pytest.mark.timeout(60)
 def test_a_misspelt_parameter_fails_configure_by_name(ros: None, tmp_path: Path) -> None:
     """A value given at start for a parameter nobody declared left the default in place
@@ -141,9 +211,17 @@ def test_a_misspelt_parameter_fails_configure_by_name(ros: None, tmp_path: Path)
         assert node.alive()
 
 
-def test_malformed_ros_arguments_are_one_line_and_exit_2() -> None:
-    command = [sys.executable, "-m", "prsm_health.ros.node", "--ros-args", "-p", "hardware_id"]
+@pytest.mark.parametrize(
+    ("ros_args", "problem"),
+    [
+        (["-p", "hardware_id"], "Failed to parse ROS arguments: "),
+        # rclpy's UnknownROSArgsError was a traceback and exit code 1.
+        (["-p", "diagnostics_rate_hz:=5.0", "--garbage"], "unknown ROS arguments ['--garbage']"),
+    ],
+)
+def test_malformed_ros_arguments_are_one_line_and_exit_2(ros_args: list[str], problem: str) -> None:
+    command = [sys.executable, "-m", "prsm_health.ros.node", "--ros-args", *ros_args]
     result = subprocess.run(command, capture_output=True, text=True, timeout=60, check=False)
     assert result.returncode == 2, result.stderr
-    assert result.stderr.startswith("prsm-health-node: invalid --ros-args: ")
+    assert result.stderr.startswith(f"prsm-health-node: invalid --ros-args: {problem}")
     assert result.stderr.count("\n") == 1 and "Traceback" not in result.stderr

@@ -8,10 +8,11 @@ from pathlib import Path
 from typing import Any
 
 import pytest
+from prsm_health_msgs.srv import ResetAfterMaintenance
 
 from prsm_health.estimation.estimator import HealthEstimator
 from prsm_health.estimation.params import load_params, params_from_mapping
-from prsm_health.outputs import INPUT_HEALTH, PERSISTENCE, health_estimate_fields
+from prsm_health.outputs import INPUT_HEALTH, JAMMED_ROLLERS, PERSISTENCE, health_estimate_fields
 from prsm_health.ros.parameters import default_params_file
 from prsm_health.ros.persistence import StateStore
 from test.ros.data import ORIGIN_S, synthetic_run, worn_params, write_bag
@@ -185,3 +186,74 @@ def test_corrupt_and_foreign_state_files_are_kept_aside(ros: None, tmp_path: Pat
         assert json.loads((tmp_path / f"{name}.json").read_text())["hardware_id"] == name
         fresh = HealthEstimator(load_params(default_params_file()))
         assert StateStore(tmp_path / f"{name}.json", name).restore(fresh).restored
+
+
+def _reset(listener: Listener, jammed_rollers: int) -> None:
+    """The node's maintenance reset to ``jammed_rollers``, which must succeed."""
+    request = ResetAfterMaintenance.Request(jammed_rollers=jammed_rollers)
+    done = listener.call(ResetAfterMaintenance, "reset_after_maintenance", request)
+    assert done.success, done.message
+
+
+@pytest.mark.timeout(120)
+def test_the_restored_estimate_is_reported_until_a_new_one(ros: None, tmp_path: Path) -> None:
+    """A restart said "stale: no input yet; last: no estimate yet" of a state with 2 jammed
+    rollers: the diagnostics report the last estimate saved with the state, marked restored,
+    until the node makes a new one; a restart without input keeps it; a reset that leaves no
+    estimate behind drops it."""
+    state_file = tmp_path / "state.json"
+    bag = write_bag(tmp_path / "run", synthetic_run(1.0))
+    node_parameters = {
+        "hardware_id": HARDWARE_ID,
+        "state_file": str(state_file),
+        "save_period_s": 3600.0,  # saved by the reset and at shutdown only
+    }
+    listener = Listener()
+
+    def jam_status() -> dict[str, Any]:
+        return listener.statuses(HARDWARE_ID).get(JAMMED_ROLLERS, {})
+
+    try:
+        with NodeProcess(tmp_path, **node_parameters) as node:
+            node.wait_log("configured")
+            listener.wait_matched()
+            play(bag, listener=listener)
+            listener.wait_for(lambda: bool(listener.health), 20.0, "an estimate")
+            _reset(listener, 2)  # 2 jammed rollers, certain: the newest estimate
+            listener.wait_for(
+                lambda: listener.health[-1]["jammed_rollers_most_likely"] == 2, 10.0, "the reset"
+            )
+            stamp_s = listener.health[-1]["stamp"]
+            assert stop_process(node.process) == 0
+        saved = json.loads(state_file.read_text())["last_estimate"]
+        assert saved["stamp_s"] == pytest.approx(stamp_s) and saved["jam_probabilities"][2] == 1
+
+        restored = (
+            "stale: no input yet; last: 2 jammed rollers (p = 1.00)"
+            f" (restored, estimate at sensor time {stamp_s:.3f} s)"
+        )
+        for _ in range(2):  # the second restart resumes from what the first saved at shutdown
+            listener.diagnostics.clear()
+            with NodeProcess(tmp_path, **node_parameters) as node:
+                node.wait_log("resumed from")
+                listener.wait_for(lambda: bool(jam_status()), 20.0, "the diagnostics")
+                assert jam_status()["level"] == "STALE"
+                assert jam_status()["message"] == restored
+                assert jam_status()["values"]["estimate_stamp_s"] == f"{stamp_s:.3f}"
+                persistence = listener.statuses(HARDWARE_ID)[PERSISTENCE]
+                assert persistence["message"] == "resumed from the state file"
+                assert stop_process(node.process) == 0
+            assert json.loads(state_file.read_text())["last_estimate"] == saved
+
+        with NodeProcess(tmp_path, **node_parameters) as node:
+            node.wait_log("resumed from")
+            listener.wait_matched()
+            _reset(listener, 0)  # no estimate of this run: the restored one no longer holds
+            listener.wait_for(
+                lambda: jam_status().get("message") == "stale: no input yet; last: no estimate yet",
+                10.0,
+                "the restored estimate dropped",
+            )
+        assert json.loads(state_file.read_text())["last_estimate"] is None
+    finally:
+        listener.close()

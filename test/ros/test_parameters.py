@@ -7,7 +7,7 @@ from typing import Any
 
 import pytest
 
-from prsm_health.outputs import PERSISTENCE, STATUS_NAMES
+from prsm_health.outputs import CONFIGURATION, PERSISTENCE, STATUS_NAMES
 from prsm_health.ros.parameters import (
     PARAMETERS,
     SPECS,
@@ -100,7 +100,7 @@ def test_docs_list_every_parameter_and_status() -> None:
     ros_types = {bool: "bool", int: "int", float: "double", str: "string"}
     for spec in PARAMETERS:
         assert f"| `{spec.name}` | {ros_types[type(spec.default)]} |" in docs
-    for name in (*STATUS_NAMES, PERSISTENCE):
+    for name in (*STATUS_NAMES, PERSISTENCE, CONFIGURATION):
         assert f"| `{name}` |" in docs
 
 

@@ -2,8 +2,10 @@
 
 from __future__ import annotations
 
+import dataclasses
 import errno
 import json
+import math
 import os
 from pathlib import Path
 
@@ -44,6 +46,51 @@ def test_save_then_restore_round_trips(
     outcome = store.restore(fresh)
     assert outcome.restored and outcome.kept_corrupt is None
     assert fresh.snapshot()["degradation"] == worn.snapshot()["degradation"]
+
+
+def test_the_last_estimate_is_saved_with_the_state(
+    tmp_path: Path, params: EstimatorParams, worn: HealthEstimator
+) -> None:
+    """The snapshot holds no estimate: the last one is saved beside it for the diagnostics of
+    a restart. One JSON cannot hold is left out; a file without one resumes without it."""
+    last = worn.current_state()
+    assert last is not None
+    store = StateStore(tmp_path / "left.json", "left")
+    store.save(worn, last)
+    outcome = store.restore(HealthEstimator(params))
+    assert outcome.restored and outcome.last_estimate == last
+
+    store.save(worn, dataclasses.replace(last, axial_load_n=math.nan))
+    assert json.loads(store.path.read_text())["last_estimate"] is None
+    assert store.restore(HealthEstimator(params)).last_estimate is None
+    document = json.loads(store.path.read_text())
+    del document["last_estimate"]  # saved before it existed
+    store.path.write_text(json.dumps(document))
+    outcome = store.restore(HealthEstimator(params))
+    assert outcome.restored and outcome.last_estimate is None
+
+
+@pytest.mark.parametrize(
+    "change",
+    [
+        {"axial_load_n": "30 kN"},
+        {"jam_probabilities": [0.5, None]},
+        {"event": 9},
+        {"unknown_field": 1.0},
+        {"stamp_s": True},
+    ],
+)
+def test_a_malformed_last_estimate_is_kept_aside(
+    tmp_path: Path, params: EstimatorParams, worn: HealthEstimator, change: dict[str, object]
+) -> None:
+    store = StateStore(tmp_path / "left.json", "left")
+    store.save(worn, worn.current_state())
+    document = json.loads(store.path.read_text())
+    document["last_estimate"].update(change)
+    store.path.write_text(json.dumps(document))
+    outcome = store.restore(HealthEstimator(params))
+    assert outcome.kept_corrupt is not None
+    assert "malformed last estimate" in outcome.problem
 
 
 def test_missing_file_is_a_fresh_start(tmp_path: Path, params: EstimatorParams) -> None:

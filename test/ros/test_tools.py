@@ -23,9 +23,15 @@ from rclpy.qos import QoSProfile, QoSReliabilityPolicy
 from rosgraph_msgs.msg import Clock
 
 from prsm_health.bags.writer import BagWriter, write_joint_states, write_motor_states
-from prsm_health.outputs import INPUT_HEALTH, Level
+from prsm_health.outputs import CONFIGURATION, INPUT_HEALTH, Level
 from prsm_health.ros.messages import stamp_seconds
-from prsm_health.ros.monitor import Monitor, MonitorOptions, diagnostics_record, table
+from prsm_health.ros.monitor import (
+    NOT_CONFIGURED,
+    Monitor,
+    MonitorOptions,
+    diagnostics_record,
+    table,
+)
 from prsm_health.ros.player import ACK_TIMEOUT_S
 from prsm_health.signals import MotorSamples
 from test.bags.samples import streamed_messages
@@ -432,6 +438,32 @@ def test_monitor_shows_only_the_nodes_statuses(tmp_path: Path) -> None:
         assert len({s["name"] for s in record["status"]}) == len(record["status"]) == 7
 
 
+@pytest.mark.timeout(120)
+def test_monitor_shows_a_failed_configure(tmp_path: Path) -> None:
+    """A node whose configure failed published nothing: the monitor said "nothing received
+    ... is the node running?". It shows the node's configuration status, in the table under
+    a first line that says the node is not configured, and as it is in JSON."""
+    with NodeProcess(
+        tmp_path,
+        "mon_failed",
+        hardware_id="failed",
+        state_file=str(tmp_path / "state.json"),
+        diagnostics_rate_hz=5,  # an integer for a double
+    ) as node:
+        node.wait_log("configure failed")
+        args = ("monitor", "--node", "/mon_failed", "--count", "1", "--timeout", "30")
+        shown = cli(*args, timeout_s=90.0)
+        as_json = cli(*args, "--json", timeout_s=90.0)
+    assert (shown.returncode, shown.stderr) == (0, "")
+    reason = "configure failed: parameter diagnostics_rate_hz: refused by ROS: "
+    assert shown.stdout.splitlines()[0] == NOT_CONFIGURED
+    assert shown.stdout.splitlines()[1].startswith(f"  ERROR configuration      {reason}")
+    assert (as_json.returncode, as_json.stderr) == (0, "")
+    (status,) = json.loads(as_json.stdout)["status"]
+    assert (status["name"], status["level"]) == (CONFIGURATION, "ERROR")
+    assert status["hardware_id"] == "failed" and status["message"].startswith(reason)
+
+
 def test_monitor_shows_foreign_messages_as_they_are(ros: None) -> None:
     """A default HealthEstimate (no probabilities; ``ros2 topic pub`` sends one) was an
     IndexError traceback, a status level 7 the usage error '7 is not a valid Level': both
@@ -516,6 +548,11 @@ def test_monitor_table() -> None:
     assert table(None, {"status": []}) == (  # the node may have estimated before
         "no estimate received since the monitor started (the node publishes one per new estimate)"
     )
+    failed = {"name": CONFIGURATION, "level": "ERROR", "message": "configure failed: x"}
+    assert table(health, {"status": [failed]}).splitlines() == [  # the estimate is an old one
+        NOT_CONFIGURED,
+        "  ERROR configuration      configure failed: x",
+    ]
 
 
 def test_monitor_table_of_odd_messages() -> None:
