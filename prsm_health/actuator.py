@@ -34,6 +34,22 @@ from prsm_health.physics.presets import Preset, load_preset
 
 FloatArray = NDArray[np.float64]
 
+#: The accepted range [low, high] of each drive-train parameter (:class:`DriveTrain` says why).
+DRIVE_TRAIN_RANGES: dict[str, tuple[float, float]] = {
+    "torque_constant_nm_per_a": (1e-4, 100.0),
+    "gear_ratio": (1.0, 1e4),
+    "gear_efficiency": (0.05, 1.0),
+    "motor_inertia_kg_m2": (1e-10, 1e3),
+    "screw_inertia_kg_m2": (1e-10, 1e3),
+    "max_current_a": (1e-3, 1e5),
+}
+#: The accepted range of :attr:`Actuator.wear_acceleration`.
+WEAR_ACCELERATION_RANGE = (1e-3, 1e9)
+
+
+def _require_range(value: float, name: str, low: float, high: float) -> None:
+    require(low <= value <= high, name, f"must be in [{low:g}, {high:g}], got {value!r}")
+
 
 @dataclass(frozen=True, kw_only=True)
 class DriveTrain:
@@ -50,6 +66,17 @@ class DriveTrain:
 
     Defaults: the downhole traction actuator of this project (a 48 V brushless motor with a
     5:1 planetary gearbox; paper 000 gives no drive-train data).
+
+    Ranges (DRIVE_TRAIN_RANGES), physically generous; beyond them a ParameterError names the
+    key (values far beyond them were accepted, then overflowed the estimator's arithmetic:
+    an inertia of 1e200 kg m^2, an efficiency of 1e-300): k_t 1e-4 to 100 N m/A (a
+    millimetre-size motor has about 1e-3, the largest torque motors tens); gear ratio 1 to
+    1e4 (direct drive to the largest multi-stage reductions; no actuator speeds its screw up,
+    and below 1 the carrier angle, the motor position times up to 1 / (2 G), could overflow);
+    efficiency 0.05 to 1 (self-locking worm gears have 0.2 to 0.5); inertias 1e-10 to 1e3
+    kg m^2 (a millimetre-size rotor has about 1e-9, a metre-size one up to about 10; the
+    screw side includes the translating mass reflected by the lead, a tonne at a 0.1 m lead
+    is 0.25); current limit 1 mA to 1e5 A (beyond the largest drives).
     """
 
     torque_constant_nm_per_a: float = 0.6
@@ -61,7 +88,8 @@ class DriveTrain:
 
     def __post_init__(self) -> None:
         require_finite_positive(self, "actuator.drive_train")
-        require(self.gear_efficiency <= 1.0, "actuator.drive_train.gear_efficiency", "must be <= 1")
+        for name, (low, high) in DRIVE_TRAIN_RANGES.items():
+            _require_range(getattr(self, name), f"actuator.drive_train.{name}", low, high)
 
     @property
     def inertia_at_motor_kg_m2(self) -> float:
@@ -116,7 +144,10 @@ class Actuator:
         or in reverse (downhole cycle: step (c), motor forward, nut moves = case 2; step (f),
         motor reverse, nut fixed = case 1).
     wear_acceleration: hours of wear per hour of running. 1 for a real actuator; scenes
-        raise it so that a short bag shows a measurable precision loss (bags/README.md).
+        raise it so that a short bag shows a measurable precision loss (bags/README.md; 4e6
+        the most). Within WEAR_ACCELERATION_RANGE, 1e-3 to 1e9: a billion hours of wear per
+        hour keeps a year's precision loss and its variance far from overflowing (1e200
+        overflowed it).
     """
 
     preset: Preset
@@ -128,6 +159,9 @@ class Actuator:
 
     def __post_init__(self) -> None:
         require_finite_positive(self, "actuator")  # wear_acceleration, its one float
+        _require_range(
+            self.wear_acceleration, "actuator.wear_acceleration", *WEAR_ACCELERATION_RANGE
+        )
 
     def loading_case(self, motor_speed_rad_s: float) -> LoadingCase:
         """The loading case for the motor's direction of rotation (forward at standstill)."""

@@ -28,12 +28,21 @@ _REAL_KINDS = ("f", "i", "u")
 _FLOAT64 = np.dtype(np.float64)
 
 
-def _check_columns(obj: object) -> None:
-    """Name the first field of ``obj`` that is not a 1-D array of real numbers, then check the
-    lengths (the slow path of MotorSamples' validation, only on a failure)."""
-    for f in fields(obj):  # type: ignore[arg-type]
-        value = getattr(obj, f.name)
-        where = f"{type(obj).__name__}.{f.name}"
+def _float64_columns(samples: MotorSamples) -> None:
+    """Name the first field of ``samples`` that is not a 1-D array of real numbers, check the
+    lengths, and hold every column as float64 (the slow path of MotorSamples' validation).
+
+    Integer columns would let values escape the estimator's checks: uint64 stamps going back
+    wrap around in a difference, and ``abs`` of int8 -128 or of the int64 minimum is itself
+    negative, so out of range passes as in range. float64 holds every value the checks must
+    see. A masked array (an ndarray subclass whose values under the mask are arbitrary) has
+    its masked entries set to NaN: each is then rejected and counted as non-finite like any
+    other invalid value, and the chunk's valid samples are kept (a ValueError would lose them
+    with it).
+    """
+    for f in fields(samples):
+        value = getattr(samples, f.name)
+        where = f"{type(samples).__name__}.{f.name}"
         if not isinstance(value, np.ndarray):
             raise ValueError(f"{where}: must be a numpy array, got {type(value).__name__}")
         if value.ndim != 1:
@@ -42,7 +51,11 @@ def _check_columns(obj: object) -> None:
             )
         if value.dtype.kind not in _REAL_KINDS:
             raise ValueError(f"{where}: must hold real numbers, got dtype {value.dtype}")
-    _check_lengths(obj)
+        if np.ma.isMaskedArray(value):
+            value = np.ma.filled(value.astype(np.float64), np.nan)
+        # The frozen dataclass' own fields, converted once here (no copy when already float64).
+        object.__setattr__(samples, f.name, np.asarray(value, dtype=np.float64))
+    _check_lengths(samples)
 
 
 @dataclass(frozen=True)
@@ -53,6 +66,7 @@ class MotorSamples:
     current_a: motor current [A]. speed_rad_s: motor speed [rad/s].
     position_rad: motor position, multi-turn (not wrapped) [rad].
     Values are as received: NaN, inf and out-of-range samples are the estimator's to reject.
+    Every column is held as a float64 ndarray (converted on construction: :func:`_float64_columns`).
     """
 
     stamp_s: FloatArray
@@ -63,16 +77,18 @@ class MotorSamples:
     def __post_init__(self) -> None:
         """Every field a 1-D numpy array of real numbers (float or integer dtype), all of one
         length; else a ValueError naming the field and the problem (the estimator would fail
-        deep inside on a column of shape (n, 1), of objects, or a list)."""
+        deep inside on a column of shape (n, 1), of objects, or a list). Other dtypes than
+        float64, and ndarray subclasses (a masked array), are converted to float64 ndarrays."""
         # Built per chunk in the hot paths (the node: one per few samples), so the common case,
-        # four float64 columns, is checked directly (about 0.4 us a call); the rest field by field.
+        # four float64 ndarrays, is checked directly (about 0.4 us a call) and kept as it is,
+        # no copy; the rest field by field.
         s, c, v, p = self.stamp_s, self.current_a, self.speed_rad_s, self.position_rad
         array = np.ndarray
         if not (
-            isinstance(s, array)
-            and isinstance(c, array)
-            and isinstance(v, array)
-            and isinstance(p, array)
+            type(s) is array
+            and type(c) is array
+            and type(v) is array
+            and type(p) is array
             and s.ndim == 1
             and s.shape == c.shape == v.shape == p.shape
             and s.dtype is _FLOAT64
@@ -80,7 +96,7 @@ class MotorSamples:
             and v.dtype is _FLOAT64
             and p.dtype is _FLOAT64
         ):
-            _check_columns(self)
+            _float64_columns(self)
 
     def __len__(self) -> int:
         return len(self.stamp_s)

@@ -11,7 +11,14 @@ S_PER_H = 3600.0
 
 
 class EstimateEvent(enum.IntEnum):
-    """What happened at this estimate (``HealthEstimate.EVENT_*``)."""
+    """What happened at this estimate (``HealthEstimate.EVENT_*``).
+
+    One per estimate, the first that applies in this order: TIME_RESET (the estimate starts a
+    new time line: its stamp may lie before the previous one's, and the evaluation splits the
+    time lines there), DIVERGENCE_RECOVERED (the load was re-initialised; on the block of a
+    time reset it is said by the next estimate instead, so that neither is lost),
+    STANDSTILL, NONE.
+    """
 
     NONE = 0
     STANDSTILL = 1

@@ -93,6 +93,7 @@ class HealthEstimator:
         self._direction = 0
         self._direction_since_s = -math.inf
         self._resumed = False
+        self._divergence_unsaid = False  # on a time reset's block: said by the next estimate
         self._last: HealthState | None = None
 
     @property
@@ -229,7 +230,8 @@ class HealthEstimator:
 
         Raises:
             ValueError: ``jammed_rollers`` not an integer within 0..N (N: the preset's
-                rollers); nothing is done then.
+                rollers), or a flag not a bool (the string "no" is true, and would reset what
+                was kept); nothing is done then.
         """
         rollers = self._bank.n_rollers
         whole = isinstance(jammed_rollers, int | np.integer) and not isinstance(
@@ -240,6 +242,13 @@ class HealthEstimator:
                 f"jammed_rollers: must be an integer within 0..{rollers} (the rollers of "
                 f"{self.params.actuator.preset.name}), got {jammed_rollers!r}"
             )
+        flags = {
+            "reset_precision_loss": reset_precision_loss,
+            "reset_fatigue_damage": reset_fatigue_damage,
+        }
+        for name, flag in flags.items():
+            if not isinstance(flag, bool):
+                raise ValueError(f"{name}: must be a bool, got {flag!r}")
         before = self.finish()
         self._bank.reset_count(int(jammed_rollers))
         self._nis.clear()  # the consistency before the maintenance says nothing about after
@@ -295,11 +304,15 @@ class HealthEstimator:
         return states
 
     def _update(self, block: Block) -> HealthState:
-        event = EstimateEvent.STANDSTILL if block.direction == 0 else EstimateEvent.NONE
+        """Estimate ``block``. Its event is the first that applies of TIME_RESET,
+        DIVERGENCE_RECOVERED, STANDSTILL, NONE (:class:`EstimateEvent`); a divergence on the
+        block of a time reset is said by the next estimate."""
+        diverged = self._divergence_unsaid
         if block.time_reset:
+            # A new time line: the load and the consistency tests start again.
             self._bank.reinitialise_load()
             self._nis.clear()
-            event = EstimateEvent.TIME_RESET
+            self._gated_run = 0
         # After a restore the time since the saved state is unknown (the input stage's clock is
         # not saved): the first block follows a hole of unknown length.
         hole = self._resumed or self._after_hole(block)
@@ -322,7 +335,14 @@ class HealthEstimator:
             self._bank.reinitialise_load()
             self._nis.clear()
             self._gated_run = 0
+            diverged = True
+        self._divergence_unsaid = diverged and block.time_reset
+        if block.time_reset:
+            event = EstimateEvent.TIME_RESET
+        elif diverged:
             event = EstimateEvent.DIVERGENCE_RECOVERED
+        else:
+            event = EstimateEvent.STANDSTILL if block.direction == 0 else EstimateEvent.NONE
         hypotheses = self._bank.hypotheses
         weights = [math.exp(h.log_prob) for h in hypotheses]
         loads, variances = self._load_moments()

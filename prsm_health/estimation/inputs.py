@@ -1,20 +1,25 @@
 """From raw motor samples to validated, averaged blocks: the estimator's input stage.
 
 Every sample is checked and either accepted or rejected with a reason that is counted (never
-silently dropped): non-finite values, values out of the drive's range, a time stamp not after
-the last accepted one, an isolated spike in the current, or a current stuck at one value.
+silently dropped): non-finite values, values out of the drive's range or a stamp beyond
+LARGEST_STAMP_S, a time stamp not after the last accepted one, an isolated spike in the
+current, or a current stuck at one value.
 Accepted samples are grouped into blocks of ``filter.block_duration_s`` on a fixed time grid;
 each block becomes one filter measurement (:class:`Block`). Everything is vectorised over the
 samples of a chunk; only chunks with time going backwards take a per-sample path.
 
 Time handling: a stamp that does not advance is rejected (TIME_BACKWARDS). If the stamps keep
-coming from a jumped-back clock, advancing on their own for ``filter.time_reset_after_s`` and
-over at least TIME_RESET_SAMPLES samples, the new time line is accepted and the next block
-carries ``time_reset``. A gap longer than
-``filter.max_gap_s`` between accepted samples starts a new block with ``after_gap``. A stamp
-that jumps ahead by more than ``filter.max_gap_s`` waits for the next accepted one: if that
-falls back between the two, the jump was a single wrong stamp and is rejected
-(TIME_BACKWARDS: out of order), instead of every sample after it until a time reset.
+coming from a jumped-back clock, covering ``filter.time_reset_after_s`` from the first of them
+and over at least TIME_RESET_SAMPLES samples, the new time line is accepted and the next block
+carries ``time_reset``. A stamp behind the latest of that line but not before its first is a
+late sample on it (jitter), not a new line; only a stamp before its first starts the count
+again. A gap longer than ``filter.max_gap_s`` between accepted samples starts a new block with
+``after_gap``. A stamp that jumps ahead by more than ``filter.max_gap_s`` (the first one ever
+too) waits for the next accepted one: if that falls back strictly between the two, the jump
+was a single wrong stamp and is rejected (TIME_BACKWARDS: out of order), instead of every
+sample after it until a time reset; a stamp after it confirms it, and so does a time reset
+(it is the last sample of the old line). A jump at the end of a chunk is held back for the
+next chunk, its verdict still open, so the result does not depend on the chunking.
 """
 
 from __future__ import annotations
@@ -42,10 +47,16 @@ STUCK_RUN_SAMPLES = 20
 #: A block whose samples span less than this [s] has no measurable slope: its acceleration
 #: and current trend are taken as zero (a speed step over a vanishing span would overflow).
 SHORTEST_SLOPE_SPAN_S = 1e-6
-#: A jumped-back clock is followed only after this many samples advancing on its new time
-#: line (and ``filter.time_reset_after_s`` of its time): a few late samples far apart, a
+#: A jumped-back clock is followed only after this many samples on its new time line (and
+#: ``filter.time_reset_after_s`` of its time): a few late samples far apart, a
 #: stale message or two delivered out of order, are rejected, not a new time line.
 TIME_RESET_SAMPLES = 10
+#: Stamps beyond this magnitude [s] are out of range: a ROS ``builtin_interfaces/Time`` carries
+#: its seconds as an int32, so no message stamp reaches 2^31 s (2038 as Unix time). Inside it
+#: the block grid's cell numbers (at most 2^32 s over ``filter.block_duration_s`` >= 1e-4 s,
+#: 4.3e13) and every time difference stay far from overflowing; a finite stamp of 1e308
+#: overflowed them.
+LARGEST_STAMP_S = 2.0**31
 
 
 class RejectReason(enum.IntEnum):
@@ -159,10 +170,11 @@ class SampleBlocker:
         self._max_speed = params.max_motor_speed_rad_s
         self._spike_a = SPIKE_SIGMAS * params.noise.current_std_a
         self.counters = InputCounters()
-        self._last_stamp = -math.inf
+        self._last_stamp = -math.inf  # the latest accepted stamp (a held sample's too)
+        self._jumped_from = -math.inf  # the stamp the latest accepted one jumped from
+        self._held: MotorSamples | None = None  # a last sample that jumped ahead (module doc)
         self._backwards_since: float | None = None  # where the jumped-back line started
-        self._backwards_last = -math.inf  # its latest stamp
-        self._backwards_samples = 0  # its samples so far, advancing
+        self._backwards_samples = 0  # its samples so far
         self._pending = _empty()
         self._anchor: float | None = None
         self._last_block_stamp: float | None = None
@@ -171,18 +183,19 @@ class SampleBlocker:
         self._time_reset = False
         self._previous_current = math.nan  # last sample before the pending ones
         self._stuck_run = 0  # length of the identical-current run ending there
-        self._held: MotorSamples | None = None  # a last sample that jumped ahead (module doc)
 
     def feed(self, samples: MotorSamples) -> list[Block]:
         """Validate ``samples`` and return the blocks they complete (in time order)."""
-        if self._held is not None:  # judged again, with what follows it
-            samples, self._held = MotorSamples.concatenate([self._held, samples]), None
         ok = self._in_range(samples)
-        before = self._last_stamp
-        ok, resets = self._advance_time(samples.stamp_s, ok)
+        held = self._held
+        if held is not None:  # accepted so far: what follows decides (module doc)
+            samples, ok = MotorSamples.concatenate([held, samples]), np.r_[True, ok]
+        ok, resets, jumped = self._advance_time(samples.stamp_s, ok, held=held is not None)
+        self._held = None
+        if jumped is not None:  # undecided: held back for the next chunk
+            self._held = samples[np.array([jumped])]  # a copy
+            ok[jumped] = False
         every = bool(ok.all())  # the common case: nothing to select
-        if self._hold_a_jump(samples, ok, every, resets, before):
-            every = False
         blocks: list[Block] = []
         begin = 0
         for reset in [*resets, len(samples)]:
@@ -204,8 +217,7 @@ class SampleBlocker:
         nothing came to contradict it."""
         pending = self._pending
         if self._held is not None:
-            pending = MotorSamples.concatenate([pending, self._held])
-            self._last_stamp, self._held = float(self._held.stamp_s[0]), None
+            pending, self._held = MotorSamples.concatenate([pending, self._held]), None
         return self._blocks(pending, final=True)
 
     # --- per-sample checks --------------------------------------------------------------
@@ -213,98 +225,90 @@ class SampleBlocker:
         self.counters.rejected[reason] += int(np.count_nonzero(mask))
 
     def _in_range(self, samples: MotorSamples) -> BoolArray:
-        """Finite and within the drive's current and speed range."""
-        finite = (
-            np.isfinite(samples.stamp_s)
-            & np.isfinite(samples.current_a)
-            & np.isfinite(samples.speed_rad_s)
-            & np.isfinite(samples.position_rad)
+        """Finite, within the drive's current and speed range, and stamped within
+        LARGEST_STAMP_S."""
+        # A comparison with NaN or inf is False here (numpy emits no warning for comparisons):
+        # one test per column tells whether every sample passes, the reasons only on a failure.
+        in_range = (
+            (np.abs(samples.stamp_s) <= LARGEST_STAMP_S)
+            & (np.abs(samples.current_a) <= self._max_current)
+            & (np.abs(samples.speed_rad_s) <= self._max_speed)
         )
-        # A NaN compares False (numpy emits no warning for comparisons).
-        in_range = (np.abs(samples.current_a) <= self._max_current) & (
-            np.abs(samples.speed_rad_s) <= self._max_speed
-        )
-        ok = np.asarray(finite & in_range)
+        ok = np.asarray(in_range & np.isfinite(samples.position_rad))
         if not ok.all():
+            finite = (
+                np.isfinite(samples.stamp_s)
+                & np.isfinite(samples.current_a)
+                & np.isfinite(samples.speed_rad_s)
+                & np.isfinite(samples.position_rad)
+            )
             self._count(RejectReason.NON_FINITE, np.asarray(~finite))
             self._count(RejectReason.OUT_OF_RANGE, np.asarray(finite & ~in_range))
         return ok
 
-    def _advance_time(self, stamps: FloatArray, ok: BoolArray) -> tuple[BoolArray, list[int]]:
+    def _advance_time(
+        self, stamps: FloatArray, ok: BoolArray, *, held: bool
+    ) -> tuple[BoolArray, list[int], int | None]:
         """Reject stamps that do not advance; follow a jumped-back time line after a while.
 
-        Returns the accepted mask and the sample indices where a new time line starts.
+        Judges the samples in ``ok`` one by one, in order, with every decision's state kept
+        across chunks (module doc). ``held``: the first sample is the one held back at the end
+        of the chunk before, accepted so far (``_last_stamp`` is its stamp); it is not judged
+        again. Returns the accepted mask, the sample indices where a new time line starts, and
+        the index of the latest accepted sample if it jumped ahead and nothing after it
+        decided whether it was a wrong stamp (the caller holds it back).
         """
         index = np.flatnonzero(ok)
-        if len(index) == 0:
-            return ok, []
-        t = stamps[index]
+        jumped = 0 if held else None  # the latest accepted sample, if it jumped ahead
+        judged = index[1:] if held else index
+        t = stamps[judged]
+        if len(t) == 0:
+            return ok, [], jumped
+        max_gap = self._params.filter.max_gap_s
         if t[0] > self._last_stamp and (len(t) == 1 or bool(np.all(np.diff(t) > 0.0))):
-            self._last_stamp = float(t[-1])
-            self._backwards_since = None
-            return ok, []
+            # Every stamp advances (the common case): a jump is confirmed by the sample after
+            # it, so only the last one can be undecided.
+            previous = float(t[-2]) if len(t) > 1 else self._last_stamp
+            self._last_stamp, self._backwards_since = float(t[-1]), None
+            if self._last_stamp - previous > max_gap:
+                self._jumped_from = previous
+                return ok, [], int(judged[-1])
+            return ok, [], None
         keep = ok.copy()
         resets = []
         reset_after = self._params.filter.time_reset_after_s
-        max_gap = self._params.filter.max_gap_s
-        jumped: int | None = None  # the latest accepted sample, if it jumped ahead
-        left = -math.inf  # the stamp it jumped from
-        for i, stamp in zip(index.tolist(), t.tolist(), strict=True):
-            if stamp > self._last_stamp:
-                jumped, left = (
-                    (i, self._last_stamp) if stamp - self._last_stamp > max_gap else (None, left)
-                )
-                self._last_stamp, self._backwards_since = stamp, None
-                continue
-            if jumped is not None and stamp > left:
-                # Back into the time line the latest sample jumped from: that one was wrong.
+        for i, stamp in zip(judged.tolist(), t.tolist(), strict=True):
+            if jumped is not None and self._jumped_from < stamp < self._last_stamp:
+                # Back into the time line the latest sample jumped from: that one was wrong,
+                # and this one is judged as if it had never come.
                 keep[jumped] = False
                 self.counters.rejected[RejectReason.TIME_BACKWARDS] += 1
-                self._last_stamp, self._backwards_since, jumped = stamp, None, None
+                self._last_stamp, jumped = self._jumped_from, None
+            if stamp > self._last_stamp:
+                if stamp - self._last_stamp > max_gap:
+                    jumped, self._jumped_from = i, self._last_stamp
+                else:
+                    jumped = None
+                self._last_stamp, self._backwards_since = stamp, None
                 continue
-            if self._backwards_since is None or stamp < self._backwards_last:
-                # A jumped-back line starts here (a stamp going back on it starts another).
+            if self._backwards_since is None or stamp < self._backwards_since:
+                # A jumped-back line starts here. A stamp behind the line's latest but not
+                # before its first is a late sample on it (jitter), not another line.
                 self._backwards_since, self._backwards_samples = stamp, 0
-            self._backwards_last = stamp
             self._backwards_samples += 1
             if (
                 stamp - self._backwards_since >= reset_after
                 and self._backwards_samples >= TIME_RESET_SAMPLES
             ):
-                # The jumped-back time line has advanced on its own: follow it from here.
-                self._last_stamp, self._backwards_since = stamp, None
+                # The jumped-back time line has run on its own: follow it from here. A sample
+                # that jumped ahead is the last one of the old line, which ends here.
+                self._last_stamp, self._backwards_since, jumped = stamp, None, None
                 self.counters.time_resets += 1
                 resets.append(i)
                 continue
             keep[i] = False
             self.counters.rejected[RejectReason.TIME_BACKWARDS] += 1
-        return keep, resets
-
-    def _hold_a_jump(
-        self, samples: MotorSamples, ok: BoolArray, every: bool, resets: list[int], before: float
-    ) -> bool:
-        """Hold back the chunk's last accepted sample (unmark it in ``ok``) if it jumped ahead
-        of the one before it (``before``: the last accepted stamp before the chunk) by more
-        than ``filter.max_gap_s``: the next chunk tells whether it was a wrong stamp. ``every``:
-        all of ``ok`` is set (the common case, judged from two stamps)."""
-        stamps = samples.stamp_s
-        if every:  # without building an index: the node calls this for every few samples
-            last = len(stamps) - 1
-            previous = float(stamps[-2]) if last > 0 else before
-        else:
-            accepted = np.flatnonzero(ok)
-            if len(accepted) == 0:
-                return False
-            last = int(accepted[-1])
-            previous = float(stamps[accepted[-2]]) if len(accepted) > 1 else before
-        if last < 0 or not stamps[last] - previous > self._params.filter.max_gap_s:
-            return False
-        if last in resets:  # the first sample of a time line followed after a jump back
-            return False
-        self._held = samples[np.array([last])]  # a copy
-        self._last_stamp = previous
-        ok[last] = False
-        return True
+        return keep, resets, jumped
 
     # --- checks on complete blocks ------------------------------------------------------
     def _spikes_and_stuck(self, current: FloatArray, processed: int, final: bool) -> BoolArray:

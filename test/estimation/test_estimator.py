@@ -19,8 +19,8 @@ from prsm_health.benchmark import (
     two_jam_scenes,
 )
 from prsm_health.estimation.estimate import EstimateEvent, HealthState
-from prsm_health.estimation.estimator import HealthEstimator
-from prsm_health.estimation.inputs import Block
+from prsm_health.estimation.estimator import GATED_BLOCKS_BEFORE_RESET, HealthEstimator
+from prsm_health.estimation.inputs import Block, RejectReason
 from prsm_health.estimation.metrics import Metrics, score
 from prsm_health.estimation.params import EstimatorParams, Fidelity, FilterParams, ModelParams
 from prsm_health.scenes.scene import Scene, scene_from_mapping
@@ -404,3 +404,149 @@ def test_a_torque_constant_off_by_five_percent_is_in_the_load_uncertainty_when_s
         expected = math.hypot(a.axial_load_std_n, 0.05 * a.axial_load_n)
         assert b.axial_load_std_n == pytest.approx(expected, rel=1e-6)
     assert stated_states[-1].precision_loss_std_m > exact_states[-1].precision_loss_std_m
+
+
+# --- sample streams the node can deliver (adversarial fuzz, 2026-11) ---------------------------
+#: The bundled example parameters (config/default.yaml's actuator: the downhole preset).
+DEFAULT = EstimatorParams(actuator=scene_from_mapping(downhole()).actuator)
+
+
+def _steady(stamps: np.ndarray, seed: int = 0, current_a: float = 2.0) -> MotorSamples:
+    """Samples at ``stamps``: a noisy constant current at 300 rad/s."""
+    rng = np.random.default_rng(seed)
+    n = len(stamps)
+    speed = 300.0 + rng.normal(0.0, 0.2, n)
+    return MotorSamples(stamps, current_a + rng.normal(0.0, 0.05, n), speed, 300.0 * stamps)
+
+
+def _fed_in_chunks(
+    samples: MotorSamples, size: int, params: EstimatorParams = DEFAULT
+) -> tuple[list[HealthState], HealthEstimator]:
+    estimator = HealthEstimator(params)
+    states = []
+    for start in range(0, len(samples), size):
+        states += estimator.process(samples[start : start + size])
+    return states + estimator.finish(), estimator
+
+
+_MS = np.arange(3000) * 1e-3
+#: Streams whose stamps jump: the case, the stamps, the time resets and the rejected samples
+#: (TIME_BACKWARDS) expected.
+JUMPING_STREAMS = {
+    # Two garbage stamps far ahead, then the stream goes on: the second confirms the first,
+    # and the good samples are followed as a time line jumped back.
+    "two stamps far ahead": (np.r_[_MS[:1000], 1e9, 2e9, 1.0 + _MS], 1, 100),
+    # One stamp far ahead, then the drive reboots (its clock restarts at 0).
+    "a stamp far ahead, then a reboot": (np.r_[100.0 + _MS[:1000], 1e9, _MS], 1, 100),
+    # Every stamp twice.
+    "equal stamps": (np.repeat(_MS, 2), 0, 3000),
+    # A stamp ahead by more than max_gap_s, three times: a duplicate neither confirms nor
+    # contradicts the jump.
+    "equal stamps after a jump": (np.r_[_MS[:1000], 5.0, 5.0, 5.0, 5.001 + _MS[:1000]], 0, 2),
+}
+
+
+def _without_counts(states: list[HealthState]) -> list[HealthState]:
+    """``states`` without their sample counts, which are those when the estimate was made:
+    a whole chunk is counted before its first estimate."""
+    return [dataclasses.replace(s, samples_accepted=0, samples_rejected=0) for s in states]
+
+
+@pytest.mark.parametrize("case", JUMPING_STREAMS)
+def test_the_same_stream_gives_the_same_result_in_any_chunks(case: str) -> None:
+    """The node feeds 1 to 20 samples at a time, replay thousands: the counters and every
+    estimate must not depend on it. (A sample held back after a jump was judged again with
+    each chunk: in chunks of 20 or 1, "two stamps far ahead" rejected every later sample with
+    no time reset, and the duplicate accepted after a jump depended on the chunks.)"""
+    stamps, time_resets, rejected = JUMPING_STREAMS[case]
+    samples = _steady(stamps)
+    whole, reference = _fed_in_chunks(samples, len(samples))
+    counters = reference.counters
+    assert counters.time_resets == time_resets
+    assert counters.rejected_total == counters.rejected[RejectReason.TIME_BACKWARDS] == rejected
+    assert counters.accepted + rejected == len(samples)
+    for size in (1, 7, 20):
+        states, estimator = _fed_in_chunks(samples, size)
+        assert estimator.counters == counters, size
+        assert _without_counts(states) == _without_counts(whole), size
+
+
+def test_a_reboot_with_jittering_stamps_is_followed_as_without_jitter() -> None:
+    """Stamps jittering by 0.5 ms at 1 kHz (some a little before the one before), and the
+    drive reboots: its clock restarts at 0. The new time line is followed once it covers
+    filter.time_reset_after_s, as without jitter. (A stamp a little back on the new line
+    started its count again: the reboot was never followed, every later sample rejected.)"""
+    rng = np.random.default_rng(3)
+    before = 1000.0 + _MS[:2000] + rng.normal(0.0, 0.5e-3, 2000)
+    after = _MS + rng.normal(0.0, 0.5e-3, len(_MS))
+    estimator = HealthEstimator(DEFAULT)
+    estimator.process(_steady(before))
+    rejected_before = estimator.counters.rejected_total
+    states = estimator.process(_steady(after, seed=1)) + estimator.finish()
+    assert estimator.counters.time_resets == 1
+    first = next(s for s in states if s.event == EstimateEvent.TIME_RESET)
+    # The first block of the new line: from the reset sample (0.1 s, a few samples more when
+    # the first stamps jitter back) to the end of its 40 ms grid cell.
+    reset_after = DEFAULT.filter.time_reset_after_s
+    assert reset_after < first.stamp_s < reset_after + 0.01 + DEFAULT.filter.block_duration_s
+    # After it, as before the reboot, only the stamps behind their predecessor are rejected.
+    out_of_order = estimator.counters.rejected_total - rejected_before - 100
+    assert out_of_order / (len(after) - 100) < 1.5 * rejected_before / len(before)
+
+
+def test_a_time_reset_is_said_and_a_divergence_with_it_is_not_lost(
+    monkeypatch: pytest.MonkeyPatch,
+) -> None:
+    """An estimate stamped before the previous one says TIME_RESET (the evaluation splits the
+    time lines there). Here the filter is gated on every block (two rollers said jammed, a
+    current the load model cannot explain): it said DIVERGENCE_RECOVERED instead, since the
+    gated blocks before the reset counted after it. Now the divergence tests start again at
+    the reset; a divergence on the reset's own block is said by the next estimate."""
+
+    def estimates() -> tuple[list[HealthState], HealthEstimator]:
+        estimator = HealthEstimator(DEFAULT)
+        estimator.reset_after_maintenance(2, reset_precision_loss=False, reset_fatigue_damage=False)
+        rng = np.random.default_rng(0)
+        states = []
+        for t0, n in ((100.0, 1000), (50.0, 500)):  # the clock jumps back by 51 s
+            t = t0 + _MS[:n]
+            current = -15.0 + rng.normal(0.0, 0.05, n)
+            speed = 1099.0 + rng.normal(0.0, 0.2, n)
+            states += estimator.process(MotorSamples(t, current, speed, 1099.0 * t))
+        return states + estimator.finish(), estimator
+
+    states, estimator = estimates()
+    events = [s.event for s in states]
+    back = [i for i in range(1, len(states)) if states[i].stamp_s < states[i - 1].stamp_s]
+    resets = [i for i, event in enumerate(events) if event == EstimateEvent.TIME_RESET]
+    assert back == resets and estimator.counters.time_resets == 1
+    recovered = [i for i, event in enumerate(events) if event == EstimateEvent.DIVERGENCE_RECOVERED]
+    assert recovered[0] < resets[0]  # gated before the reset too
+    # The first recovery after the reset: its block is the GATED_BLOCKS_BEFORE_RESET-th gated.
+    after = next(i for i in recovered if i > resets[0])
+    assert after - resets[0] == GATED_BLOCKS_BEFORE_RESET - 1
+
+    # A divergence on the reset's block (forced): said by the next estimate.
+    original = HealthEstimator._diverged
+
+    def diverged_at_the_reset(self: HealthEstimator, block: Block, step: Any) -> bool:
+        return original(self, block, step) or block.time_reset
+
+    monkeypatch.setattr(HealthEstimator, "_diverged", diverged_at_the_reset)
+    states, _ = estimates()
+    reset = next(i for i, s in enumerate(states) if s.event == EstimateEvent.TIME_RESET)
+    assert states[reset + 1].event == EstimateEvent.DIVERGENCE_RECOVERED
+
+
+def test_maintenance_flags_must_be_bools() -> None:
+    """The string "no" is true: reset_precision_loss="no" reset the precision loss."""
+    estimator = HealthEstimator(DEFAULT)
+    for name in ("reset_precision_loss", "reset_fatigue_damage"):
+        for bad in ("no", 0, 1, None, np.bool_(False)):
+            flags = {"reset_precision_loss": False, "reset_fatigue_damage": False, name: bad}
+            with pytest.raises(ValueError, match=rf"^{name}: must be a bool, got {bad!r}"):
+                estimator.reset_after_maintenance(0, **flags)  # type: ignore[arg-type]
+    assert (
+        estimator.reset_after_maintenance(0, reset_precision_loss=True, reset_fatigue_damage=False)
+        == []
+    )

@@ -11,6 +11,7 @@ import pytest
 
 from prsm_health.actuator import Actuator
 from prsm_health.estimation.inputs import (
+    LARGEST_STAMP_S,
     STUCK_RUN_SAMPLES,
     TIME_RESET_SAMPLES,
     Block,
@@ -273,3 +274,84 @@ def test_the_acceleration_variance_is_that_of_a_speed_difference() -> None:
     assert measured == pytest.approx(expected, rel=0.2)  # 400 blocks: about 7 % sampling error
     merged = merge_blocks(full[:5])
     assert merged.motor_acceleration_var_rad2_s4 == pytest.approx(expected / 5)
+
+
+# --- what numpy arrays can hold (adversarial fuzz, 2026-11) -----------------------------------
+def test_motor_samples_hold_float64_without_copying_float64_columns() -> None:
+    """Built for every few samples in the node: float64 columns are kept as they are."""
+    samples = run(0.01)
+    again = MotorSamples(
+        samples.stamp_s, samples.current_a, samples.speed_rad_s, samples.position_rad
+    )
+    assert again.stamp_s is samples.stamp_s and again.position_rad is samples.position_rad
+    converted = MotorSamples(
+        samples.stamp_s.astype(np.float32),
+        np.arange(len(samples), dtype=np.int8),
+        np.arange(len(samples), dtype=np.uint64),
+        samples.position_rad.astype(">f8"),  # float64, but not in the machine's byte order
+    )
+    for name in ("stamp_s", "current_a", "speed_rad_s", "position_rad"):
+        column = getattr(converted, name)
+        assert type(column) is np.ndarray and column.dtype == np.float64, name
+        assert column.dtype.isnative, name
+
+
+def test_integer_columns_are_checked_as_the_values_they_hold() -> None:
+    """uint64 stamps going back wrapped around in a difference (taken as advancing: negative
+    block durations, then a math domain error in the filter); abs(int8 -128) and abs(int64
+    min) are negative, so -128 A and -9.2e18 rad/s passed the range check."""
+    blocker = SampleBlocker(PARAMS)
+    n = 200
+    stamps = np.r_[1000, 999, 1000 + np.arange(1, n - 1)].astype(np.uint64)
+    current = np.where(np.arange(n) % 4 >= 2, -128, 5).astype(np.int8)
+    speed = np.full(n, 150, dtype=np.int64)
+    speed[3::5] = np.iinfo(np.int64).min
+    integers = MotorSamples(stamps, current, speed, np.zeros(n))  # type: ignore[arg-type]
+    blocks = blocker.feed(integers) + blocker.flush()
+    counters = blocker.counters
+    # The first stamp goes back: the one before it is out of order (it jumped from nothing).
+    assert counters.rejected[RejectReason.TIME_BACKWARDS] == 1
+    out_of_range = (current == -128) | (speed == np.iinfo(np.int64).min)
+    assert counters.rejected[RejectReason.OUT_OF_RANGE] == int(np.count_nonzero(out_of_range))
+    assert counters.accepted + counters.rejected_total == n
+    assert all(b.duration_s > 0.0 for b in blocks)
+    assert all(b.motor_torque_nm > 0.0 and b.motor_speed_rad_s == 150.0 for b in blocks)
+
+
+def test_masked_entries_are_rejected_as_non_finite() -> None:
+    """A numpy masked array passed MotorSamples' checks with whatever lay under its mask, then
+    raised TypeError in the input stage. Masked entries are invalid values: NaN, rejected and
+    counted like any other, and the chunk's other samples are kept."""
+    samples = run(0.2)
+    masked = np.zeros(len(samples), dtype=bool)
+    masked[[0, 50, 51]] = True
+    stamps = np.ma.masked_array(samples.stamp_s.astype(np.float32), mask=masked)
+    current = np.ma.masked_array(samples.current_a, mask=np.roll(masked, 100))
+    speed, position = samples.speed_rad_s, samples.position_rad
+    faulty = MotorSamples(stamps, current, speed, position)  # type: ignore[arg-type]
+    assert type(faulty.stamp_s) is np.ndarray and np.isnan(faulty.stamp_s[masked]).all()
+    _, blocker = feed_in_chunks(faulty, 7)
+    assert blocker.counters.rejected[RejectReason.NON_FINITE] == 6
+    assert blocker.counters.accepted == len(samples) - 6
+
+
+@pytest.mark.parametrize("size", [1, 30, 2000])
+def test_a_stamp_beyond_what_a_ros_time_carries_is_out_of_range(size: int) -> None:
+    """A finite stamp of -1e308 crashed the block grid (OverflowError in a floor). Stamps
+    beyond +-2^31 s, the int32 seconds of builtin_interfaces/Time, are out of range; inside
+    that range, a clock jumping from one end to the other is a gap."""
+    samples = run(2.0)
+    stamps = samples.stamp_s.copy()
+    stamps[0] = -1e308
+    stamps[10] = -LARGEST_STAMP_S * (1.0 + 1e-15)
+    stamps[20] = LARGEST_STAMP_S * (1.0 + 1e-15)
+    stamps[500:1000] += -LARGEST_STAMP_S  # the oldest stamp a message can carry
+    stamps[1000:] += LARGEST_STAMP_S - 3.0  # to the newest, less a second to spare
+    faulty = MotorSamples(stamps, samples.current_a, samples.speed_rad_s, samples.position_rad)
+    blocks, blocker = feed_in_chunks(faulty, size)
+    counters = blocker.counters
+    assert counters.rejected[RejectReason.OUT_OF_RANGE] == 3
+    # The jump to the oldest stamps goes back: followed after time_reset_after_s.
+    assert counters.time_resets == 1 and counters.gaps == 1
+    assert counters.accepted + counters.rejected_total == len(samples)
+    assert all(math.isfinite(b.stamp_s) and b.duration_s > 0.0 for b in blocks)

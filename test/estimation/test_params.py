@@ -7,10 +7,14 @@ import math
 import re
 from pathlib import Path
 
+import numpy as np
 import pytest
 
+from prsm_health.actuator import DRIVE_TRAIN_RANGES, WEAR_ACCELERATION_RANGE
+from prsm_health.estimation.estimator import HealthEstimator
 from prsm_health.estimation.params import load_params, params_from_mapping
 from prsm_health.physics.errors import ParameterError
+from prsm_health.signals import MotorSamples
 
 
 def test_minimal_document_takes_the_defaults() -> None:
@@ -255,3 +259,62 @@ def test_a_section_given_twice_is_refused_naming_file_key_and_line(tmp_path: Pat
         match=r"twice\.yaml, line 3, column 1: duplicate key 'noise' \(first on line 2\)",
     ):
         load_params(path)
+
+
+# --- the drive train's ranges (adversarial fuzz, 2026-11) ------------------------------------
+#: Values that were accepted (finite and > 0), then overflowed the estimator's arithmetic.
+OVERFLOWED = [
+    ("drive_train.motor_inertia_kg_m2", 1e200),
+    ("drive_train.gear_efficiency", 1e-300),
+    ("drive_train.torque_constant_nm_per_a", 1e300),
+    ("drive_train.gear_ratio", 1e300),
+    ("wear_acceleration", 1e200),
+]
+RANGES = [(f"drive_train.{key}", limits) for key, limits in DRIVE_TRAIN_RANGES.items()]
+RANGES.append(("wear_acceleration", WEAR_ACCELERATION_RANGE))
+
+
+def _actuator_with(key: str, value: float) -> dict[str, object]:
+    """The parameter document with ``actuator.<key>`` (``drive_train.x`` for a drive-train
+    field) set to ``value``."""
+    actuator: dict[str, object] = dict(DOWNHOLE)
+    if key.startswith("drive_train."):
+        actuator["drive_train"] = {key.split(".", 1)[1]: value}
+    else:
+        actuator[key] = value
+    return {"actuator": actuator}
+
+
+@pytest.mark.parametrize(
+    ("key", "value"),
+    OVERFLOWED
+    + [(key, low * (1.0 - 1e-9)) for key, (low, _) in RANGES]
+    + [(key, high * (1.0 + 1e-9)) for key, (_, high) in RANGES],
+)
+def test_drive_train_values_beyond_their_range_are_refused_naming_the_key(
+    key: str, value: float
+) -> None:
+    with pytest.raises(ParameterError, match=rf"^actuator\.{re.escape(key)}: must be in \["):
+        params_from_mapping(_actuator_with(key, value))
+
+
+@pytest.mark.parametrize(("key", "limits"), RANGES)
+def test_drive_trains_at_the_edges_of_their_ranges_give_finite_estimates(
+    key: str, limits: tuple[float, float]
+) -> None:
+    """Each parameter at either end of its range, the others at their defaults: samples the
+    drive can deliver (half its current limit, a tenth of the largest speed) are estimated,
+    nothing raises and no estimate is non-finite."""
+    n = 400
+    t = 1.0 + np.arange(n) * 1e-3
+    noise = np.random.default_rng(0).normal(0.0, 1e-3, n)
+    for value in limits:
+        params = params_from_mapping(_actuator_with(key, value))
+        current = 0.5 * params.actuator.drive_train.max_current_a * (1.0 + noise)
+        speed = np.full(n, 0.1 * params.max_motor_speed_rad_s)
+        estimator = HealthEstimator(params)
+        states = estimator.process(MotorSamples(t, current, speed, speed * t)) + estimator.finish()
+        assert states, (key, value)
+        for state in states:
+            numbers = [v for v in dataclasses.astuple(state) if isinstance(v, float)]
+            assert all(math.isfinite(v) for v in numbers), (key, value, state)

@@ -257,6 +257,12 @@ def test_bank_soak_keeps_covariances_definite_and_probabilities_normalised(
 
 
 # --- the whole estimator on samples -----------------------------------------------------------
+#: The streams' clock restarts at 0 (a drive reboot, a time reset) beyond this [s]: stamps
+#: beyond 2^31 s are out of range (``inputs.LARGEST_STAMP_S``), and the gaps of the full soak
+#: add up to about 2.8e9 s: its last quarter would have had no estimate, and never ended.
+CLOCK_RESTART_S = 1e9
+
+
 class _Stream:
     """Sample streams of the scenarios, continuing in time and motor angle."""
 
@@ -269,6 +275,8 @@ class _Stream:
         self, n: int, speed: np.ndarray, load: np.ndarray, dt: np.ndarray | float
     ) -> MotorSamples:
         rng = self.rng
+        if self.time > CLOCK_RESTART_S:
+            self.time = 0.0
         steps = np.broadcast_to(np.asarray(dt, dtype=np.float64), (n,))
         stamp = self.time + np.cumsum(steps)
         angle = self.angle + np.cumsum(speed * steps)

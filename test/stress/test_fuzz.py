@@ -10,8 +10,9 @@ from __future__ import annotations
 
 import math
 import shutil
-from dataclasses import fields
+from dataclasses import fields, replace
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 import pytest
@@ -204,32 +205,50 @@ def _check_states(states: list[HealthState]) -> None:
 floats = st.floats(allow_nan=True, allow_infinity=True, allow_subnormal=True, width=64)
 plausible = st.floats(-100.0, 100.0)
 #: Fuzzed stamps reach decades either side of zero: a forward jump by a drive clock switching
-#: from boot time to the epoch (1.7e9 s) is a gap, never a crash.
+#: from boot time to the epoch (1.7e9 s) is a gap, never a crash; beyond the +-2^31 s a ROS
+#: stamp carries, a stamp is out of range (and up to 1e308, finite, it overflowed the grid).
 STAMP_LIMIT_S = 4e9
 stamps = st.one_of(
-    st.floats(-STAMP_LIMIT_S, STAMP_LIMIT_S), st.sampled_from([math.nan, math.inf, -math.inf])
+    st.floats(-STAMP_LIMIT_S, STAMP_LIMIT_S),
+    st.sampled_from([math.nan, math.inf, -math.inf, -1e308, 1e308]),
 )
+#: Column dtypes: the integer ones reach their extremes (abs(int8 -128) and abs of the int64
+#: minimum are negative; uint64 differences wrap around).
+DTYPES = [np.float64, np.float32, np.float16, np.int64, np.int8, np.uint64]
+
+
+def _as_dtype(values: np.ndarray, dtype: Any) -> np.ndarray:
+    """``values`` in ``dtype``; an integer type takes NaN as 0 and clips to its extremes."""
+    if np.dtype(dtype).kind in "iu":
+        info = np.iinfo(dtype)
+        low, high = float(info.min), float(info.max)
+        values = np.nan_to_num(values, posinf=high, neginf=low).clip(low, high)
+    with np.errstate(over="ignore", invalid="ignore"):
+        return values.astype(dtype)
 
 
 @st.composite
 def sample_arrays(draw: st.DrawFn) -> MotorSamples:
     """Malformed samples: plausible values mixed with anything a float can be, stamps that
-    jump, repeat or go backwards, in float64, float32, float16 or integer arrays."""
+    jump, repeat or go backwards, in float64, float32, float16 or integer arrays (integer
+    stamps too, whole seconds), some entries masked (numpy masked arrays)."""
     n = draw(st.integers(1, 200))
     stamp = np.cumsum(draw(hnp.arrays(np.float64, n, elements=st.floats(-0.002, 0.01))))
     stamp = stamp + draw(st.sampled_from([0.0, 3e5, -5.0, 1.7e9]))
-    columns = [stamp]
+    columns: list[np.ndarray] = [stamp]
     for _ in range(3):
         values = draw(hnp.arrays(np.float64, n, elements=st.one_of(plausible, floats)))
-        dtype = draw(st.sampled_from([np.float64, np.float32, np.float16, np.int64]))
-        if dtype is np.int64:
-            values = np.nan_to_num(values, posinf=1e9, neginf=-1e9).clip(-1e9, 1e9)
-        with np.errstate(over="ignore", invalid="ignore"):
-            columns.append(values.astype(dtype))
+        columns.append(_as_dtype(values, draw(st.sampled_from(DTYPES))))
     if draw(st.booleans()):  # bad stamps too
         bad = draw(hnp.arrays(np.float64, n, elements=stamps))
         mask = draw(hnp.arrays(np.bool_, n))
         columns[0] = np.where(mask, bad, stamp)
+    if draw(st.integers(0, 4)) == 0:  # integer stamps: whole seconds, repeating
+        columns[0] = _as_dtype(columns[0], draw(st.sampled_from([np.int64, np.uint64])))
+    if draw(st.integers(0, 4)) == 0:
+        column = draw(st.integers(0, 3))
+        mask = draw(hnp.arrays(np.bool_, n))
+        columns[column] = np.ma.masked_array(columns[column], mask=mask)
     return MotorSamples(*columns)
 
 
@@ -247,6 +266,30 @@ def test_malformed_samples_are_rejected_and_counted_never_raised(
     counters = estimator.counters
     assert counters.accepted + counters.rejected_total == sum(len(c) for c in chunks)
     assert all(count >= 0 for count in counters.rejected)
+
+
+def _without_counts(states: list[HealthState]) -> list[HealthState]:
+    """``states`` without their sample counts, which are those when the estimate was made."""
+    return [replace(s, samples_accepted=0, samples_rejected=0) for s in states]
+
+
+@settings(max_examples=40, deadline=None)
+@given(chunks=st.lists(sample_arrays(), min_size=1, max_size=4), size=st.integers(1, 25))
+def test_malformed_samples_give_the_same_result_in_any_chunks(
+    chunks: list[MotorSamples], size: int
+) -> None:
+    """The same samples fed whole and ``size`` at a time (the node feeds a few at a time):
+    the same counters and estimates."""
+    stream = MotorSamples.concatenate(chunks)
+    whole = HealthEstimator(PARAMS)
+    reference = whole.process(stream) + whole.finish()
+    split = HealthEstimator(PARAMS)
+    states: list[HealthState] = []
+    for start in range(0, len(stream), size):
+        states += split.process(stream[start : start + size])
+    states += split.finish()
+    assert split.counters == whole.counters
+    assert _without_counts(states) == _without_counts(reference)
 
 
 def test_samples_of_different_lengths_are_a_value_error() -> None:
