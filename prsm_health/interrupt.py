@@ -2,7 +2,8 @@
 
 ``simulate`` closes a complete, shorter bag and ``replay`` reports what it read: both end
 their loop when :func:`stop_on_interrupt`'s event is set instead of being torn down by
-KeyboardInterrupt in the middle of a write, and exit with :data:`EXIT_INTERRUPTED`, as do
+KeyboardInterrupt in the middle of a write (a second Ctrl-C does tear them down, for a user
+who will not wait), and exit with :data:`EXIT_INTERRUPTED`, as do
 ``play`` and ``monitor`` (whose ROS session turns SIGINT and SIGTERM into its stop event:
 :func:`prsm_health.ros.runtime.ros_session`).
 """
@@ -13,6 +14,7 @@ import signal
 import threading
 from collections.abc import Iterator
 from contextlib import contextmanager
+from types import FrameType
 
 #: Exit code of a command stopped by Ctrl-C (128 + SIGINT, as a shell reports it).
 EXIT_INTERRUPTED = 130
@@ -20,9 +22,16 @@ EXIT_INTERRUPTED = 130
 
 @contextmanager
 def stop_on_interrupt() -> Iterator[threading.Event]:
-    """An event that SIGINT sets while the block runs (the previous handler restored after)."""
+    """An event that the first SIGINT sets while the block runs; the previous handler is back
+    from then on (a second Ctrl-C interrupts at once, as before the block) and after it."""
     stop = threading.Event()
-    previous = signal.signal(signal.SIGINT, lambda _signal, _frame: stop.set())
+    previous = signal.getsignal(signal.SIGINT)
+
+    def request_stop(_signal: int, _frame: FrameType | None) -> None:
+        stop.set()
+        signal.signal(signal.SIGINT, previous)
+
+    signal.signal(signal.SIGINT, request_stop)
     try:
         yield stop
     finally:

@@ -13,7 +13,8 @@ JointState by :class:`~prsm_health.bags.reader.InputTopics`) chunk by chunk, run
 A damaged bag (cut short, a corrupt chunk) is not fatal: everything read before the damage is
 estimated and reported, and the damage is returned in :attr:`ReplayResult.damage`. A replay
 stopped early (``stop``, Ctrl-C in the command) likewise ends with what was read: the output
-bag closed complete, the truth scored up to the last sample read.
+bag closed complete, the estimates scored against the truth up to the last of them (a jam
+after it is not scored: :mod:`~prsm_health.estimation.metrics`).
 """
 
 from __future__ import annotations
@@ -113,7 +114,6 @@ def replay(
     states: list[HealthState] = []
     damage: list[BagError] = []
     samples = 0
-    last_stamp_s = -np.inf  # of the samples read
     stopped = False
     elapsed = 0.0
     with ExitStack() as stack:
@@ -131,7 +131,6 @@ def replay(
                     output.add(piece, new, estimator.counters)
                 started = time.perf_counter()
             samples += len(chunk)
-            last_stamp_s = max(last_stamp_s, float(chunk.stamp_s.max(initial=-np.inf)))
             if progress is not None:
                 progress(len(chunk))
             started = time.perf_counter()
@@ -144,8 +143,6 @@ def replay(
         if output is not None:
             output.add(None, last, estimator.counters)
     truth = _truth(bag, damage)
-    if truth is not None and stopped:  # what came after the last sample read was not seen
-        truth = truth[truth.stamp_s <= last_stamp_s]
     metrics = None
     if truth is not None and states and len(truth):
         preset = params.actuator.preset

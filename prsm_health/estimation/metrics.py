@@ -19,8 +19,9 @@ Definitions:
   the last one). Its count is compared with the true count at that time: a block in which a
   roller seizes may already report it. For each increase of the true count at time t_j, the
   delay from t_j to the end of the first block that reports the new count as the most likely
-  (None if never); a false declaration is each onset of a most likely count above the true
-  one;
+  (None if never); an increase after the last estimate's block was not seen and is not scored
+  (a replay that ended early: stopped, or a bag damaged before its truth ends); a false
+  declaration is each onset of a most likely count above the true one;
 - precision loss: the final error (absolute and relative to the final truth), and the
   fraction of estimates whose truth lies within +-2 std.
 
@@ -218,6 +219,8 @@ def _jam_detections(
     detections = []
     for index in truth.jam_onsets:
         onset = float(truth.stamp_s[index])
+        if onset > seen_until[-1]:  # after the last estimate: not seen (module docstring)
+            break
         count = int(counts[index])
         after = np.flatnonzero((seen_until >= onset) & (estimated == count))
         delay = float(seen_until[after[0]] - onset) if after.size else None

@@ -83,6 +83,18 @@ def test_known_errors_delays_and_false_declarations() -> None:
     assert metrics.precision_loss_error_percent == pytest.approx(2.0, rel=0.05)
 
 
+def test_a_jam_after_the_last_estimate_is_not_scored() -> None:
+    """Estimates up to 8 s of a truth that jams at 10 s (a replay stopped, or a bag damaged
+    before its truth ends): the jam was never seen, so it is not counted as never identified."""
+    stamps = np.arange(0.02, 8.0, 0.04)
+    states = [state(float(t), 20e3, 100.0, 0, 1e-6 * float(t)) for t in stamps]
+    metrics = score(states, truth(20.0, 10.0), rated_load_n=55e3, largest_screw_speed_rad_s=73.3)
+    assert metrics.jams == ()
+    seen = score(states, truth(20.0, 7.0), rated_load_n=55e3, largest_screw_speed_rad_s=73.3)
+    (jam,) = seen.jams
+    assert jam.onset_s == pytest.approx(7.0) and jam.delay_s is None
+
+
 def test_overconfident_load_fails_the_nees_test_and_coverage_counts() -> None:
     stamps = np.arange(0.02, 20.0, 0.04)
     states = [state(float(t), 21e3, 100.0, 0, 1e-6 * float(t) + 3e-7) for t in stamps]
