@@ -136,7 +136,8 @@ class PersistenceHealth:
     """The state file: where, when last saved, what happened at restore and at the last save.
 
     restored: the estimator resumed from the file at configure. kept_corrupt: where an
-    unusable state file was moved aside (None if none was), with the reason in problem.
+    unusable state file was moved aside (None if none was), with the reason in problem; a
+    restored file's problem is a part of it not used (its last estimate).
     save_error: the last save failure (None after a successful save).
     """
 
@@ -398,9 +399,11 @@ def persistence_status(
         message = f"{health.problem}; kept as {health.kept_corrupt}, started fresh"
     elif health.last_save_s is not None:
         level, message = Level.OK, f"saved {age:.0f} s ago"
-    else:
+    elif health.restored:
         level = Level.OK
-        message = "resumed from the state file" if health.restored else "not saved yet"
+        message = "; ".join(filter(None, ("resumed from the state file", health.problem)))
+    else:
+        level, message = Level.OK, "not saved yet"
     numbers = {"saves": health.saves, "last_save_age_s": age, "restored": int(health.restored)}
     values = [*_numbers(numbers), ("state_file", health.state_file)]
     if health.kept_corrupt is not None:

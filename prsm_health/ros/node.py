@@ -333,6 +333,8 @@ class HealthNode(LifecycleNode):
             )
         elif outcome.restored:
             self.get_logger().info(f"resumed from {config.state_file}")
+            if outcome.problem:
+                self.get_logger().warning(outcome.problem)
             # The diagnostics report it until the first new estimate (it is not published on
             # ~/health: it is no new estimate).
             self._latest = self._restored = outcome.last_estimate

@@ -16,10 +16,11 @@ fsync'ed and renamed over the state file; then the directory is fsync'ed, so aft
 power loss the file is either the old or the new state, never a mix.
 
 Restoring: a missing file means a fresh start. A file that cannot be used (not JSON, not this
-format, another hardware_id, a malformed last estimate, or refused by
-:meth:`HealthEstimator.restore`: malformed, or another actuator's geometry) is moved aside to
-``<name>.corrupt-<UTC time>`` and reported; the estimator then starts fresh. A bad file is
-therefore never silently replaced by zeros.
+format, another hardware_id, or refused by :meth:`HealthEstimator.restore`: malformed, or
+another actuator's geometry) is moved aside to ``<name>.corrupt-<UTC time>`` and reported;
+the estimator then starts fresh. A bad file is therefore never silently replaced by zeros. A
+malformed ``last_estimate`` alone (or one of another version, with other fields) loses only
+itself: the state is restored and the problem reported (:attr:`RestoreOutcome.problem`).
 """
 
 from __future__ import annotations
@@ -48,8 +49,9 @@ def default_state_file(hardware_id: str) -> Path:
 
 @dataclass(frozen=True)
 class RestoreOutcome:
-    """What :meth:`StateStore.restore` did: resumed (with the last estimate saved, if any),
-    started fresh, or kept a bad file aside."""
+    """What :meth:`StateStore.restore` did: resumed (with the last estimate saved, if any;
+    ``problem`` says why one saved was not used), started fresh, or kept a bad file aside
+    (``problem`` says why)."""
 
     restored: bool
     kept_corrupt: Path | None = None
@@ -107,13 +109,16 @@ class StateStore:
             return self._keep_aside(f"unreadable state file {self.path}: {exc}")
         try:
             document = json.loads(text)
-            snapshot = self._snapshot(document)
-            last_estimate = _estimate(document.get("last_estimate"))
-            estimator.restore(snapshot)
+            estimator.restore(self._snapshot(document))
         except ValueError as exc:  # JSONDecodeError and SnapshotError are ValueErrors
             return self._keep_aside(f"unusable state file {self.path}: {exc}")
         except RecursionError:  # json.loads of lists nested thousands deep
             return self._keep_aside(f"unusable state file {self.path}: nested too deeply")
+        try:
+            last_estimate = _estimate(document.get("last_estimate"))
+        except SnapshotError as exc:  # only the diagnostics' copy: the state is restored
+            problem = f"the last estimate of {self.path} is not used: {exc}"
+            return RestoreOutcome(restored=True, problem=problem)
         return RestoreOutcome(restored=True, last_estimate=last_estimate)
 
     def _snapshot(self, document: Any) -> dict[str, Any]:

@@ -13,6 +13,7 @@ import pytest
 
 from prsm_health.estimation.estimator import HealthEstimator
 from prsm_health.estimation.params import EstimatorParams, params_from_mapping
+from prsm_health.outputs import Level, PersistenceHealth, persistence_status
 from prsm_health.ros.persistence import FORMAT, StateStore, default_state_file
 from test.ros.data import synthetic_run
 
@@ -80,17 +81,26 @@ def test_the_last_estimate_is_saved_with_the_state(
         {"stamp_s": True},
     ],
 )
-def test_a_malformed_last_estimate_is_kept_aside(
+def test_a_malformed_last_estimate_loses_only_itself(
     tmp_path: Path, params: EstimatorParams, worn: HealthEstimator, change: dict[str, object]
 ) -> None:
+    """The state is restored, the last estimate (the diagnostics' copy) dropped and named. The
+    whole file was kept aside: precision loss, fatigue and jam probabilities started fresh for
+    a field only the diagnostics read (or for one of a newer version)."""
     store = StateStore(tmp_path / "left.json", "left")
     store.save(worn, worn.current_state())
     document = json.loads(store.path.read_text())
     document["last_estimate"].update(change)
     store.path.write_text(json.dumps(document))
-    outcome = store.restore(HealthEstimator(params))
-    assert outcome.kept_corrupt is not None
-    assert "malformed last estimate" in outcome.problem
+    resumed = HealthEstimator(params)
+    outcome = store.restore(resumed)
+    assert outcome.restored and outcome.kept_corrupt is None and outcome.last_estimate is None
+    assert "last estimate of" in outcome.problem and "malformed last estimate" in outcome.problem
+    assert resumed.snapshot()["degradation"] == worn.snapshot()["degradation"]
+    status = persistence_status(
+        PersistenceHealth(str(store.path), restored=True, problem=outcome.problem), "left", 0.0
+    )
+    assert status.level == Level.OK and status.message.startswith("resumed from the state file; ")
 
 
 def test_missing_file_is_a_fresh_start(tmp_path: Path, params: EstimatorParams) -> None:
