@@ -33,7 +33,7 @@ from prsm_health.physics.load_distribution import LoadingCase
 from prsm_health.physics.model import ModelResult, OperatingPoint, evaluate
 from prsm_health.physics.presets import PRESET_NAMES, load_preset
 from prsm_health.replay_command import add_replay_command
-from prsm_health.ros.tools import add_ros_commands
+from prsm_health.ros.tools import add_ros_commands, number_or_nan
 from prsm_health.scenes.recording import record
 from prsm_health.scenes.scene import load_scene, scene_names
 from prsm_health.scenes.simulator import Simulator
@@ -57,10 +57,7 @@ class _Parser(argparse.ArgumentParser):
 
 def _finite(text: str) -> float:
     """A finite number (argparse type), refused as ``invalid finite number: '30000k'``."""
-    try:
-        value = float(text)
-    except ValueError:
-        value = math.nan
+    value = number_or_nan(text)
     if not math.isfinite(value):
         raise argparse.ArgumentTypeError(f"invalid finite number: {text!r}")
     return value

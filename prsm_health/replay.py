@@ -4,7 +4,8 @@
 JointState by :class:`~prsm_health.bags.reader.InputTopics`) chunk by chunk, runs one
 :class:`~prsm_health.estimation.estimator.HealthEstimator`, and optionally
 
-- writes an MCAP bag (``out``) with the inputs, ``/prsm_health/health`` (HealthEstimate) and
+- writes an MCAP bag (``out``; with the input bag's rosbag2 ``custom_data``, so a simulated
+  bag's scene record goes along) with the inputs, ``/prsm_health/health`` (HealthEstimate) and
   ``/diagnostics`` (DiagnosticArray, once per second of bag time, input counters brought up
   to date every OUTPUT_PIECE_SAMPLES samples): the content the node
   publishes (both are built by :mod:`prsm_health.outputs`), on the bag's time line;
@@ -42,6 +43,7 @@ from prsm_health.bags import (
     read_truth,
     write_motor_states,
 )
+from prsm_health.bags.bagfiles import custom_data
 from prsm_health.bags.stamps import seconds_to_stamps
 from prsm_health.bags.topics import DIAGNOSTICS_TOPIC, HEALTH_TOPIC, TRUTH_TOPIC
 from prsm_health.bags.typestore import typestore
@@ -117,7 +119,11 @@ def replay(
     stopped = False
     elapsed = 0.0
     with ExitStack() as stack:
-        output = stack.enter_context(_Output(out, params, hardware_id)) if out else None
+        output = (
+            stack.enter_context(_Output(out, params, hardware_id, custom_data(bag)))
+            if out
+            else None
+        )
         started = time.perf_counter()
         for chunk in _chunks(bag, topics, damage):
             # With an output bag, the diagnostics need the input counters once a second.
@@ -187,8 +193,12 @@ def _truth(bag: Path, damage: list[BagError]) -> TruthSamples | None:
 class _Output:
     """The replay's output bag: inputs, health estimates, diagnostics once per second."""
 
-    def __init__(self, path: Path, params: EstimatorParams, hardware_id: str) -> None:
+    def __init__(
+        self, path: Path, params: EstimatorParams, hardware_id: str, custom: dict[str, str]
+    ) -> None:
         self._writer = BagWriter(path)
+        for key, value in custom.items():  # what a simulated input bag records of its scene
+            self._writer.set_custom_data(key, value)
         self._params = params
         self._hardware_id = hardware_id
         self._diagnostics = DiagnosticsTracker()

@@ -32,7 +32,7 @@ from prsm_health.estimation.params import EstimatorParams, bundled_params_file, 
 from prsm_health.interrupt import EXIT_INTERRUPTED, stop_on_interrupt
 from prsm_health.outputs import DEFAULT_HARDWARE_ID
 from prsm_health.replay import ReplayResult, replay
-from prsm_health.scenes.recording import bag_actuator, scene_actuator
+from prsm_health.scenes.recording import scene_actuator, usable_bag_actuator
 from prsm_health.yamlio import YamlError, load_yaml_mapping
 
 
@@ -98,7 +98,7 @@ def _params(args: argparse.Namespace) -> tuple[EstimatorParams, str]:
         params = params_from_mapping(data)
     except ValueError as exc:  # a bad value: say which file holds it
         raise ValueError(f"--params: {path}: {exc}") from exc
-    scene = scene_actuator(args.scene) if args.scene else bag_actuator(args.bag)
+    scene = scene_actuator(args.scene) if args.scene else usable_bag_actuator(args.bag, path)
     if scene is None:
         return params, str(path)
     source = f"{path}, actuator of {scene.origin}"

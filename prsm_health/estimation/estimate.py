@@ -16,7 +16,8 @@ class EstimateEvent(enum.IntEnum):
     One per estimate, the first that applies in this order: TIME_RESET (the estimate starts a
     new time line: its stamp may lie before the previous one's, and the evaluation splits the
     time lines there), DIVERGENCE_RECOVERED (the load was re-initialised; on the block of a
-    time reset it is said by the next estimate instead, so that neither is lost),
+    time reset it is said by the next estimate instead, so that neither is lost: unless the
+    input ends there, or a maintenance reset comes first, after which it is no news),
     STANDSTILL, NONE.
     """
 

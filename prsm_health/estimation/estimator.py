@@ -253,6 +253,7 @@ class HealthEstimator:
         self._bank.reset_count(int(jammed_rollers))
         self._nis.clear()  # the consistency before the maintenance says nothing about after
         self._gated_run = 0
+        self._divergence_unsaid = False  # a recovery before it is no news after it
         self._degradation.reset(
             precision_loss=reset_precision_loss, fatigue_damage=reset_fatigue_damage
         )

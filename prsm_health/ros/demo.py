@@ -37,7 +37,7 @@ from prsm_health.bags.reader import read_truth
 from prsm_health.ros.monitor import Monitor, MonitorOptions
 from prsm_health.ros.parameters import default_params_file
 from prsm_health.ros.runtime import loopback_env, ros_session
-from prsm_health.scenes.recording import bag_actuator
+from prsm_health.scenes.recording import usable_bag_actuator
 from prsm_health.yamlio import load_yaml_mapping
 
 DEMO_DOMAIN_ID = 42
@@ -72,7 +72,7 @@ def bag_duration_s(bag: Path) -> float:
 
 def demo_params(bag: Path, workdir: Path) -> tuple[Path, str]:
     """The node's params file for ``bag`` (module docstring) and a line saying what it is."""
-    scene = bag_actuator(bag)
+    scene = usable_bag_actuator(bag, default_params_file())
     if scene is None:
         return default_params_file(), f"params {default_params_file()}"
     params = load_yaml_mapping(default_params_file())

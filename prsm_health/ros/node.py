@@ -259,11 +259,8 @@ class HealthNode(LifecycleNode):
         values = self._parameter_values()
         try:
             config = node_config(values, self._declare_errors)
-        except ConfigError as exc:
-            hardware_id = values["hardware_id"]
-            if "hardware_id" in exc.problems:
-                hardware_id = SPECS["hardware_id"].default
-            return self._configure_failed(str(exc), str(hardware_id))
+        except ConfigError as exc:  # under the hardware_id as given: what a monitor asks for
+            return self._configure_failed(str(exc), str(values["hardware_id"]))
         try:
             topic = self.resolve_topic_name(config.input_topic)
         except Exception as exc:  # the expanded name is checked by rcl only
@@ -284,8 +281,8 @@ class HealthNode(LifecycleNode):
         """Log why configure failed and report it on /diagnostics every
         :data:`CONFIGURE_FAILED_PERIOD_S` until a configure succeeds: the node stays
         unconfigured and publishes nothing else, so that without this a monitor could not
-        tell it from a node that is not running. ``hardware_id``: the parameter's, or the
-        default when that is not valid."""
+        tell it from a node that is not running. ``hardware_id``: the parameter's, valid or
+        not."""
         self.get_logger().error(f"configure failed: {reason}")
         self._configure_failure = configuration_status(reason, hardware_id)
         if self._configure_failure_timer is None:

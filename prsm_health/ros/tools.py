@@ -20,8 +20,8 @@ Parser = TypeVar("Parser", bound=argparse.ArgumentParser)
 DEMO_BAG = Path("bags", "sudden-jam")
 
 
-def _number(text: str) -> float:
-    """``text`` as a float, NaN if it is not a number (which the types below refuse)."""
+def number_or_nan(text: str) -> float:
+    """``text`` as a float, NaN if it is not a number (which the argparse types refuse)."""
     try:
         return float(text)
     except ValueError:
@@ -29,14 +29,14 @@ def _number(text: str) -> float:
 
 
 def _positive(text: str) -> float:
-    value = _number(text)
+    value = number_or_nan(text)
     if not (math.isfinite(value) and value > 0.0):
         raise argparse.ArgumentTypeError(f"must be a finite number > 0, got {text!r}")
     return value
 
 
 def _non_negative(text: str) -> float:
-    value = _number(text)
+    value = number_or_nan(text)
     if not (math.isfinite(value) and value >= 0.0):
         raise argparse.ArgumentTypeError(f"must be a finite number >= 0, got {text!r}")
     return value

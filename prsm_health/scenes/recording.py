@@ -16,6 +16,7 @@ much), whatever the bag is called later (:func:`bag_actuator`).
 
 from __future__ import annotations
 
+import sys
 import threading
 from collections.abc import Callable
 from pathlib import Path
@@ -28,6 +29,7 @@ from prsm_health.actuator import Actuator, actuator_from_mapping
 from prsm_health.bags.bagfiles import custom_data
 from prsm_health.bags.writer import BagWriter, write_joint_states, write_motor_states, write_truth
 from prsm_health.physics.errors import ParameterError
+from prsm_health.physics.presets import PRESET_NAMES
 from prsm_health.scenes.scene import load_scene, scene_names
 from prsm_health.scenes.simulator import DEFAULT_CHUNK_SAMPLES, Simulator
 from prsm_health.scenes.validation import prefixed
@@ -57,7 +59,7 @@ def record(
     with BagWriter(path) as writer:
         writer.set_custom_data(SCENE_KEY, scene.name)
         if scene.actuator_yaml is not None:
-            writer.set_custom_data(ACTUATOR_KEY, scene.actuator_yaml)
+            writer.set_custom_data(ACTUATOR_KEY, _recorded_section(scene.actuator_yaml))
         remaining = scene.samples
         for chunk in simulator.run(DEFAULT_CHUNK_SAMPLES):
             receive_ns = np.round(chunk.receive_time_s * NS_PER_S).astype(np.int64)
@@ -74,6 +76,16 @@ def record(
             if stop is not None and stop.is_set():
                 break
     return motor_count, truth_count
+
+
+def _recorded_section(actuator_yaml: str) -> str:
+    """The actuator section to record: a preset file named by a relative path made absolute
+    (it was found from the working directory of the simulation, not of a later replay)."""
+    section = yaml.safe_load(actuator_yaml)
+    preset = str(section["preset"])
+    if preset in PRESET_NAMES:
+        return actuator_yaml
+    return yaml.safe_dump({**section, "preset": str(Path(preset).resolve())}, sort_keys=False)
 
 
 class SceneActuator(NamedTuple):
@@ -122,6 +134,21 @@ def bag_actuator(bag: Path) -> SceneActuator | None:
         raise prefixed(exc, where, separator=": ") from exc
     origin = f"scene {data.get(SCENE_KEY, 'unnamed')} (recorded in the bag)"
     return SceneActuator(section, actuator, origin)
+
+
+def usable_bag_actuator(bag: Path, instead: Path) -> SceneActuator | None:
+    """:func:`bag_actuator`, or None with a warning on stderr when the bag's record cannot
+    build an actuator (a preset file no longer where it was): the caller then uses the
+    actuator of the parameters file ``instead``, which the warning names.
+
+    Raises:
+        BagError: the bag cannot be opened.
+    """
+    try:
+        return bag_actuator(bag)
+    except ParameterError as exc:
+        print(f"warning: {exc}; the actuator of {instead} is used", file=sys.stderr)
+        return None
 
 
 def bundled_scene_of(bag: Path) -> str | None:

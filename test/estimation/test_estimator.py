@@ -26,6 +26,7 @@ from prsm_health.estimation.params import EstimatorParams, Fidelity, FilterParam
 from prsm_health.scenes.scene import Scene, scene_from_mapping
 from prsm_health.scenes.simulator import SimulationChunk, simulate
 from prsm_health.signals import MotorSamples
+from test.estimation.chunks import fed_in_chunks, without_counts
 
 RPM = 2.0 * math.pi / 60.0
 
@@ -423,10 +424,7 @@ def _fed_in_chunks(
     samples: MotorSamples, size: int, params: EstimatorParams = DEFAULT
 ) -> tuple[list[HealthState], HealthEstimator]:
     estimator = HealthEstimator(params)
-    states = []
-    for start in range(0, len(samples), size):
-        states += estimator.process(samples[start : start + size])
-    return states + estimator.finish(), estimator
+    return fed_in_chunks(estimator.process, samples, size) + estimator.finish(), estimator
 
 
 _MS = np.arange(3000) * 1e-3
@@ -446,12 +444,6 @@ JUMPING_STREAMS = {
 }
 
 
-def _without_counts(states: list[HealthState]) -> list[HealthState]:
-    """``states`` without their sample counts, which are those when the estimate was made:
-    a whole chunk is counted before its first estimate."""
-    return [dataclasses.replace(s, samples_accepted=0, samples_rejected=0) for s in states]
-
-
 @pytest.mark.parametrize("case", JUMPING_STREAMS)
 def test_the_same_stream_gives_the_same_result_in_any_chunks(case: str) -> None:
     """The node feeds 1 to 20 samples at a time, replay thousands: the counters and every
@@ -468,7 +460,7 @@ def test_the_same_stream_gives_the_same_result_in_any_chunks(case: str) -> None:
     for size in (1, 7, 20):
         states, estimator = _fed_in_chunks(samples, size)
         assert estimator.counters == counters, size
-        assert _without_counts(states) == _without_counts(whole), size
+        assert without_counts(states) == without_counts(whole), size
 
 
 def test_a_reboot_with_jittering_stamps_is_followed_as_without_jitter() -> None:
@@ -536,6 +528,17 @@ def test_a_time_reset_is_said_and_a_divergence_with_it_is_not_lost(
     states, _ = estimates()
     reset = next(i for i, s in enumerate(states) if s.event == EstimateEvent.TIME_RESET)
     assert states[reset + 1].event == EstimateEvent.DIVERGENCE_RECOVERED
+
+    # Unsaid when the input ended at the reset's block, it is not said after a maintenance
+    # (the first estimate after one said DIVERGENCE_RECOVERED).
+    estimator = HealthEstimator(DEFAULT)
+    estimator.process(_steady(100.0 + _MS[:1000]))
+    ended = estimator.process(_steady(50.0 + _MS[:140], seed=1)) + estimator.finish()
+    assert ended[-1].event == EstimateEvent.TIME_RESET
+    monkeypatch.setattr(HealthEstimator, "_diverged", original)
+    estimator.reset_after_maintenance(0, reset_precision_loss=False, reset_fatigue_damage=False)
+    after = estimator.process(_steady(60.0 + _MS[:400], seed=2))
+    assert after and all(s.event != EstimateEvent.DIVERGENCE_RECOVERED for s in after)
 
 
 def test_maintenance_flags_must_be_bools() -> None:

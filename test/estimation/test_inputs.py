@@ -23,6 +23,7 @@ from prsm_health.estimation.params import EstimatorParams
 from prsm_health.physics.meshing import carrier_speed_rad_s
 from prsm_health.physics.presets import load_preset
 from prsm_health.signals import MotorSamples
+from test.estimation.chunks import fed_in_chunks
 
 PARAMS = EstimatorParams(actuator=Actuator(preset=load_preset("dong2022-downhole")))
 RATE_HZ = 1000.0
@@ -43,10 +44,7 @@ def run(seconds: float = 2.0, seed: int = 0) -> MotorSamples:
 
 def feed_in_chunks(samples: MotorSamples, size: int) -> tuple[list[Block], SampleBlocker]:
     blocker = SampleBlocker(PARAMS)
-    blocks = []
-    for start in range(0, len(samples), size):
-        blocks += blocker.feed(samples[start : start + size])
-    return blocks + blocker.flush(), blocker
+    return fed_in_chunks(blocker.feed, samples, size) + blocker.flush(), blocker
 
 
 def with_values(samples: MotorSamples, **changes: tuple[int, float]) -> MotorSamples:

@@ -29,6 +29,16 @@ def renamed(tmp_path_factory: pytest.TempPathFactory) -> Path:
     return out
 
 
+def copy_recording(bag: Path, copy: Path, actuator_section: str) -> Path:
+    """A copy of ``bag`` whose metadata.yaml records ``actuator_section`` instead."""
+    shutil.copytree(bag, copy)
+    meta = copy / "metadata.yaml"
+    info = yaml.safe_load(meta.read_text())
+    info["rosbag2_bagfile_information"]["custom_data"][ACTUATOR_KEY] = actuator_section
+    meta.write_text(yaml.safe_dump(info))
+    return copy
+
+
 def test_the_bag_records_its_scene_and_actuator_section(renamed: Path) -> None:
     data = custom_data(renamed)
     assert data[SCENE_KEY] == "sudden-jam"
@@ -98,15 +108,48 @@ def test_the_demo_names_the_commands_that_read_a_damaged_bag(renamed: Path, tmp_
     assert bag_duration_s(renamed) == pytest.approx(5.0, abs=0.01)
 
 
+def test_a_preset_file_is_recorded_by_its_absolute_path(
+    tmp_path: Path, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    """A scene naming its preset file relative to where it is simulated: the bag was not
+    replayable from another directory (not even with --params: the record wins)."""
+    project = tmp_path / "project"
+    project.mkdir()
+    shutil.copy(ROOT / "prsm_health/physics/presets/dong2022-downhole.yaml", project / "mine.yaml")
+    scene = yaml.safe_load((ROOT / "prsm_health/scenes/data/sudden-jam.yaml").read_text())
+    scene["actuator"]["preset"] = "mine.yaml"
+    (project / "scene.yaml").write_text(yaml.safe_dump(scene))
+    monkeypatch.chdir(project)
+    assert main(["simulate", "--scene", "scene.yaml", "--duration", "1", "--out", "bag"]) == 0
+    monkeypatch.chdir(tmp_path)
+    found = bag_actuator(project / "bag")
+    assert found is not None and found.section["preset"] == str(project / "mine.yaml")
+    assert found.actuator == load_scene(str(project / "scene.yaml")).actuator
+
+
+def test_replay_warns_and_goes_on_when_the_record_cannot_be_used(
+    renamed: Path, tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    """A preset file that is no longer there: the actuator of the parameters file, said."""
+    bag = copy_recording(renamed, tmp_path / "bag", "preset: /gone/p.yaml\n")
+    assert main(["replay", str(bag)]) == 0
+    captured = capsys.readouterr()
+    assert f"warning: {bag}: custom_data {ACTUATOR_KEY}: preset: " in captured.err
+    assert "default.yaml is used" in captured.err
+    assert "actuator of" not in captured.out
+
+
+def test_replays_output_bag_keeps_the_record(renamed: Path, tmp_path: Path) -> None:
+    """So that it too replays with the scene's actuator (it had custom_data: null)."""
+    out = tmp_path / "out"
+    assert main(["replay", str(renamed), "--out", str(out)]) == 0
+    assert custom_data(out) == custom_data(renamed)
+
+
 def test_an_invalid_recorded_actuator_names_the_bag_and_the_field(
     renamed: Path, tmp_path: Path
 ) -> None:
-    bag = tmp_path / "bag"
-    shutil.copytree(renamed, bag)
-    meta = bag / "metadata.yaml"
-    info = yaml.safe_load(meta.read_text())
-    info["rosbag2_bagfile_information"]["custom_data"][ACTUATOR_KEY] = "preset: no-such-preset\n"
-    meta.write_text(yaml.safe_dump(info))
+    bag = copy_recording(renamed, tmp_path / "bag", "preset: no-such-preset\n")
     where = re.escape(f"{bag}: custom_data {ACTUATOR_KEY}: preset: unknown preset")
     with pytest.raises(ParameterError, match=where):
         bag_actuator(bag)

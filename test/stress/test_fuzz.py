@@ -10,7 +10,7 @@ from __future__ import annotations
 
 import math
 import shutil
-from dataclasses import fields, replace
+from dataclasses import fields
 from pathlib import Path
 from typing import Any
 
@@ -51,6 +51,7 @@ from test.bags.samples import (
     with_quantised_stamps,
     write_bag,
 )
+from test.estimation.chunks import fed_in_chunks, without_counts
 
 #: Messages of the fuzzed bag: three MCAP chunks (about 12,600 MotorState each).
 MESSAGES = 30_000
@@ -268,11 +269,6 @@ def test_malformed_samples_are_rejected_and_counted_never_raised(
     assert all(count >= 0 for count in counters.rejected)
 
 
-def _without_counts(states: list[HealthState]) -> list[HealthState]:
-    """``states`` without their sample counts, which are those when the estimate was made."""
-    return [replace(s, samples_accepted=0, samples_rejected=0) for s in states]
-
-
 @settings(max_examples=40, deadline=None)
 @given(chunks=st.lists(sample_arrays(), min_size=1, max_size=4), size=st.integers(1, 25))
 def test_malformed_samples_give_the_same_result_in_any_chunks(
@@ -284,12 +280,9 @@ def test_malformed_samples_give_the_same_result_in_any_chunks(
     whole = HealthEstimator(PARAMS)
     reference = whole.process(stream) + whole.finish()
     split = HealthEstimator(PARAMS)
-    states: list[HealthState] = []
-    for start in range(0, len(stream), size):
-        states += split.process(stream[start : start + size])
-    states += split.finish()
+    states = fed_in_chunks(split.process, stream, size) + split.finish()
     assert split.counters == whole.counters
-    assert _without_counts(states) == _without_counts(reference)
+    assert without_counts(states) == without_counts(reference)
 
 
 def test_samples_of_different_lengths_are_a_value_error() -> None:

@@ -1,0 +1,28 @@
+"""Feeding samples a few at a time, as the node does, and comparing what comes out."""
+
+from __future__ import annotations
+
+import dataclasses
+from collections.abc import Callable
+from typing import TypeVar
+
+from prsm_health.estimation.estimate import HealthState
+from prsm_health.signals import MotorSamples
+
+T = TypeVar("T")
+
+
+def fed_in_chunks(
+    feed: Callable[[MotorSamples], list[T]], samples: MotorSamples, size: int
+) -> list[T]:
+    """What ``feed`` returns for ``samples`` given ``size`` at a time, in order."""
+    out: list[T] = []
+    for start in range(0, len(samples), size):
+        out += feed(samples[start : start + size])
+    return out
+
+
+def without_counts(states: list[HealthState]) -> list[HealthState]:
+    """``states`` without their sample counts, which are those when the estimate was made:
+    a whole chunk is counted before its first estimate."""
+    return [dataclasses.replace(s, samples_accepted=0, samples_rejected=0) for s in states]
