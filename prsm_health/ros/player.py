@@ -10,7 +10,10 @@ damage is in the :class:`PlayReport`. :class:`BagSource` is what the player need
 
 Optionally ``/clock`` (rosgraph_msgs/Clock) carries the log time, for nodes with
 ``use_sim_time``. Publishers are reliable (a best-effort subscriber matches them as well) and
-keep ``PUBLISHER_DEPTH`` messages.
+keep all messages until every reliable subscriber has them (KEEP_ALL): a subscriber that
+falls behind holds the play back instead of losing messages. With keep-last (10 s at 1 kHz)
+a node with reliable input fed at ``--rate 10`` received 25,474 of 60,000 messages, and the
+play, which can wait only for what its history still holds, reported none lost.
 
 ``wait_for_subscribers_s``: before the first message, wait until every played topic (and
 ``/clock`` if published) has a subscriber (at most that long; otherwise an error naming the
@@ -38,7 +41,7 @@ from typing import Any
 import rclpy
 from rclpy.duration import Duration
 from rclpy.exceptions import InvalidTopicNameException
-from rclpy.qos import QoSProfile, QoSReliabilityPolicy
+from rclpy.qos import QoSHistoryPolicy, QoSProfile, QoSReliabilityPolicy
 from rosbags.rosbag2 import Reader
 from rosgraph_msgs.msg import Clock
 
@@ -47,8 +50,7 @@ from prsm_health.bags.raw import read_raw_messages
 from prsm_health.ros.messages import time_msg
 from prsm_health.ros.runtime import message_class
 
-#: History of each publisher: 10 s at 1 kHz, so a reliable subscriber that falls behind
-#: for a while catches up without losses.
+#: Depth of each publisher's QoS profile (its history is KEEP_ALL: module docstring).
 PUBLISHER_DEPTH = 10_000
 #: After the publishers have matched their subscribers, time for the subscribers to match
 #: the publishers [s].
@@ -303,7 +305,11 @@ def play(
         )
     node = rclpy.create_node("prsm_health_player")
     try:
-        qos = QoSProfile(depth=PUBLISHER_DEPTH, reliability=QoSReliabilityPolicy.RELIABLE)
+        qos = QoSProfile(
+            history=QoSHistoryPolicy.KEEP_ALL,
+            depth=PUBLISHER_DEPTH,
+            reliability=QoSReliabilityPolicy.RELIABLE,
+        )
         publishers: dict[str, Any] = {}
         for topic in (t for t, count in source.counts.items() if count):  # none for nothing
             try:

@@ -326,6 +326,41 @@ def test_play_loops_until_interrupted(ros: None, tmp_path: Path) -> None:
     assert received[:200] == received[200:400]  # the same stamps again: a loop, not a shift
 
 
+@pytest.mark.timeout(180)
+def test_play_faster_than_a_reliable_node_loses_nothing(ros: None, tmp_path: Path) -> None:
+    """20,000 messages at --rate 50 (50 kHz) into a node with reliable input, which takes
+    them far more slowly: the play is held back and every one arrives. With a keep-last
+    history of 10,000 the player overwrote what the node had not yet taken: a node fed the
+    60,000 of sudden-jam at --rate 10 received 25,474 and counted one jammed roller of two,
+    and the play, which waits only for what its history still holds, exited 0."""
+    count = 20_000
+    bag = write_bag(tmp_path / "bag", synthetic_run(count / 1000.0, from_rest=False, seed=5))
+    listener = Listener("fast")
+
+    def received() -> int:
+        inputs = listener.statuses("fast").get(INPUT_HEALTH)
+        return int(inputs["values"]["received"]) if inputs else 0
+
+    try:
+        with NodeProcess(
+            tmp_path,
+            "fast",
+            hardware_id="fast",
+            input_qos="reliable",
+            state_file=str(tmp_path / "state.json"),
+            diagnostics_rate_hz=5.0,
+        ):
+            player = start_player(bag, "--rate", "50")
+            try:
+                out, _ = player.communicate(timeout=150)
+            finally:
+                stop_process(player)
+            assert player.returncode == 0, out
+            listener.wait_for(lambda: received() == count, 30.0, f"{count} received")
+    finally:
+        listener.close()
+
+
 def test_play_names_what_a_reliable_subscriber_did_not_acknowledge(
     ros: None, tmp_path: Path
 ) -> None:
