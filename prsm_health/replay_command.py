@@ -32,7 +32,7 @@ from prsm_health.estimation.params import EstimatorParams, bundled_params_file, 
 from prsm_health.interrupt import EXIT_INTERRUPTED, stop_on_interrupt
 from prsm_health.outputs import DEFAULT_HARDWARE_ID
 from prsm_health.replay import ReplayResult, replay
-from prsm_health.scenes.recording import scene_actuator, usable_bag_actuator
+from prsm_health.scenes.recording import SceneActuator, scene_actuator, usable_bag_actuator
 from prsm_health.yamlio import YamlError, load_yaml_mapping
 
 
@@ -87,8 +87,9 @@ def add_replay_command(commands: Any) -> None:
     parser.set_defaults(handler=run_replay)
 
 
-def _params(args: argparse.Namespace) -> tuple[EstimatorParams, str]:
-    """The estimator parameters and a line saying where they came from (module docstring)."""
+def _params(args: argparse.Namespace) -> tuple[EstimatorParams, str, SceneActuator | None]:
+    """The estimator parameters, a line saying where they came from, and the scene's actuator
+    they hold, if any (module docstring)."""
     path = args.params or bundled_params_file()
     try:
         data = load_yaml_mapping(path)
@@ -100,11 +101,11 @@ def _params(args: argparse.Namespace) -> tuple[EstimatorParams, str]:
         raise ValueError(f"--params: {path}: {exc}") from exc
     scene = scene_actuator(args.scene) if args.scene else usable_bag_actuator(args.bag, path)
     if scene is None:
-        return params, str(path)
+        return params, str(path), None
     source = f"{path}, actuator of {scene.origin}"
     if args.params is not None and not args.scene:
         source += " instead of the file's (--scene NAME|FILE to choose another)"
-    return dataclasses.replace(params, actuator=scene.actuator), source
+    return dataclasses.replace(params, actuator=scene.actuator), source, scene
 
 
 def _check_outputs(args: argparse.Namespace) -> None:
@@ -154,7 +155,7 @@ def run_replay(args: argparse.Namespace) -> int:
         ValueError: an output that cannot be written, or no sample of the bag accepted (the
             summary is printed first).
     """
-    params, source = _params(args)
+    params, source, scene = _params(args)
     _check_outputs(args)
     topics = InputTopics(
         motor_state=args.motor_state_topic,
@@ -189,11 +190,19 @@ def run_replay(args: argparse.Namespace) -> int:
             print(f"  {why}")
             return 1
         raise ValueError(why)
+    if scene is None and result.truth is not None:  # simulated, yet no record of its scene
+        print(
+            f"  note: {args.bag} has a ground truth but no record of its scene's actuator (a"
+            " bag cut short loses it): --scene NAME|FILE gives the estimator the scene's"
+        )
+    partial = _partial(result)
     if args.metrics_json is not None:
         if result.metrics is None:
             print(f"  --metrics-json: not written, {args.bag} has no ground truth to score")
         else:
-            text = json.dumps(result.metrics.to_dict(), indent=2, allow_nan=False)
+            document = {**result.metrics.to_dict(), "samples_read": result.samples}
+            document["partial"] = partial or None
+            text = json.dumps(document, indent=2, allow_nan=False)
             try:
                 args.metrics_json.write_text(text + "\n")
             except OSError as exc:
@@ -205,9 +214,8 @@ def run_replay(args: argparse.Namespace) -> int:
         from prsm_health.report import write_report  # matplotlib: only when a report is asked
 
         try:
-            write_report(
-                args.report, result.states, result.truth, result.metrics, title=args.bag.name
-            )
+            title = f"{args.bag.name} ({partial})" if partial else args.bag.name
+            write_report(args.report, result.states, result.truth, result.metrics, title=title)
         except OSError as exc:
             raise ValueError(f"--report: cannot write into {args.report}: {exc}") from exc
         written.append(f"report {args.report / 'index.html'}")
@@ -216,6 +224,15 @@ def run_replay(args: argparse.Namespace) -> int:
     if result.stopped:
         return EXIT_INTERRUPTED
     return 1 if result.damage is not None else 0
+
+
+def _partial(result: ReplayResult) -> str:
+    """What made the replay cover part of the bag only, for its outputs ("" if nothing)."""
+    if result.stopped:
+        return f"stopped by Ctrl-C after {result.samples} samples"
+    if result.damage is not None:
+        return f"up to the damage after {result.samples} samples"
+    return ""
 
 
 def _rejected_why(bag: Path, topics: InputTopics, result: ReplayResult) -> str:

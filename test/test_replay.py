@@ -211,6 +211,9 @@ def test_ctrl_c_ends_the_replay_with_what_was_read(
     assert (report / "index.html").is_file()
     scores = json.loads(metrics.read_text())
     assert [jam["count"] for jam in scores["jams"]] == [1]
+    # The outputs say they cover part of the bag (they looked like those of a 20 s run).
+    assert scores["partial"] == "stopped by Ctrl-C after 20000 samples"
+    assert "(stopped by Ctrl-C after 20000 samples)" in (report / "index.html").read_text()
     assert signal.getsignal(signal.SIGINT) is signal.default_int_handler
 
 

@@ -192,6 +192,7 @@ class Monitor:
         self.hardware_id = options.hardware_id
         #: Until then: the latest statuses of each hardware id.
         self._unclaimed: dict[str, dict[str, Any]] = {}
+        self._seen_ids: set[str] = set()  # of the statuses met once the hardware_id is known
         #: Why the node's answer gave no hardware id ("" if it did not answer).
         self._no_hardware_id = ""
         self._next_ask_s = 0.0
@@ -224,6 +225,7 @@ class Monitor:
     def _on_diagnostics(self, msg: Any) -> None:
         record = diagnostics_record(msg)
         if self.hardware_id is not None:
+            self._seen_ids.update(s["hardware_id"] for s in record["status"])
             self._show(statuses_of(record, self.hardware_id))
             return
         for hardware_id in {s["hardware_id"] for s in record["status"]}:
@@ -295,6 +297,11 @@ class Monitor:
         if not self.health_received and self.latest_diagnostics is None:
             if self._unclaimed and self.hardware_id is None:
                 return f"prsm_health statuses on /diagnostics{within}, but {unknown}"
+            if others := sorted(self._seen_ids - {str(self.hardware_id)}):
+                return (
+                    f"no status of hardware_id {self.hardware_id!r} on /diagnostics{within};"
+                    f" statuses came for {', '.join(map(repr, others))} (--hardware-id)"
+                )
             return (
                 f"nothing received on {self.options.health_topic} or /diagnostics{within}: is"
                 " the node running, under this name, with the same ROS_DOMAIN_ID?"

@@ -439,6 +439,16 @@ def test_monitor_says_what_was_missing(ros: None) -> None:
             "estimates received within 2 s, but no prsm_health statuses of hardware_id left"
             " on /diagnostics"
         )
+        # A mistyped --hardware-id looked like no node at all ("is the node running?").
+        mistyped = Monitor(MonitorOptions(timeout_s=2.0, hardware_id="Left"))
+        status = DiagnosticStatus(name=INPUT_HEALTH, hardware_id="left", message="ok")
+        mistyped._on_diagnostics(DiagnosticArray(status=[status]))
+        mistyped.timed_out = True
+        assert mistyped.shortfall() == (
+            "no status of hardware_id 'Left' on /diagnostics within 2 s; statuses came for"
+            " 'left' (--hardware-id)"
+        )
+        mistyped.close()
     finally:
         counted.close()
         listed.close()

@@ -50,7 +50,9 @@ def test_the_bag_records_its_scene_and_actuator_section(renamed: Path) -> None:
     assert custom_data(renamed / "mission-7.mcap") == data
 
 
-def test_a_renamed_or_bare_bag_gives_its_scenes_actuator(renamed: Path, tmp_path: Path) -> None:
+def test_a_renamed_or_bare_bag_gives_its_scenes_actuator(
+    renamed: Path, tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
     expected = load_scene("sudden-jam").actuator
     for bag in (renamed, renamed / "mission-7.mcap"):
         found = bag_actuator(bag)
@@ -61,6 +63,11 @@ def test_a_renamed_or_bare_bag_gives_its_scenes_actuator(renamed: Path, tmp_path
     cut = tmp_path / "cut.mcap"
     cut.write_bytes(data[: len(data) // 2])
     assert custom_data(cut) == {} and bag_actuator(cut) is None
+    # Replayed, such a bag says so: its truth shows it was simulated (it fell back silently).
+    trunc = tmp_path / "trunc.mcap"
+    trunc.write_bytes((BUNDLED_BAGS / "sudden-jam/sudden-jam.mcap").read_bytes()[:1_300_000])
+    assert main(["replay", str(trunc)]) == 1  # damaged
+    assert "has a ground truth but no record of its scene's actuator" in capsys.readouterr().out
     # ... but one named after a bundled scene still gives that scene's.
     named = tmp_path / "sudden-jam.mcap"
     shutil.copy(cut, named)
