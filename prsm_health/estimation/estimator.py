@@ -189,6 +189,8 @@ class HealthEstimator:
             degradation = Degradation(**{k: float(v) for k, v in snapshot["degradation"].items()})
             accepted = int(snapshot["samples_accepted"])
             rejected = [int(v) for v in snapshot["samples_rejected"]]
+        except SnapshotError:
+            raise  # it says what is wrong
         except (KeyError, TypeError, ValueError, AttributeError) as exc:
             raise SnapshotError(f"malformed state: {exc!r}") from exc
         if not any(math.isfinite(state[4]) for state in states):
