@@ -26,11 +26,13 @@ METADATA = "metadata.yaml"
 
 @dataclass(frozen=True)
 class BagFiles:
-    """The storage files of a bag, and its topics (name -> type) if ``metadata.yaml`` has them."""
+    """The storage files of a bag, and its topics (name -> type) if ``metadata.yaml`` has them,
+    with its ``custom_data`` (string keys and values; empty without ``metadata.yaml``)."""
 
     path: Path
     files: tuple[Path, ...]
     topics: dict[str, str] | None
+    custom_data: dict[str, str]
 
 
 def _information(meta: Path) -> dict[str, Any]:
@@ -69,7 +71,7 @@ def _bag_files(bag: Path) -> BagFiles:
     if bag.is_file():
         if bag.suffix != ".mcap":
             raise BagError(bag, "not a .mcap file or a rosbag2 bag directory")
-        return BagFiles(bag, (bag,), None)
+        return BagFiles(bag, (bag,), None, {})
     if not bag.is_dir():
         raise BagError(bag, "no such bag (neither a directory nor a .mcap file)")
     meta = bag / METADATA
@@ -102,7 +104,7 @@ def _bag_files(bag: Path) -> BagFiles:
         ):
             raise BagError(meta, f"topic entry without name and type: {entry!r}")
         topics[topic["name"]] = topic["type"]
-    return BagFiles(bag, files, topics)
+    return BagFiles(bag, files, topics, _strings(info.get("custom_data")))
 
 
 def custom_data(path: str | Path) -> dict[str, str]:
@@ -117,10 +119,12 @@ def custom_data(path: str | Path) -> dict[str, str]:
     """
     files = bag_files(path)
     if files.topics is None:  # a bare .mcap file
-        info = _mcap_information(files.path)
-    else:
-        info = _information(files.path / METADATA)
-    data = info.get("custom_data")
+        return _strings(_mcap_information(files.path).get("custom_data"))
+    return files.custom_data
+
+
+def _strings(data: object) -> dict[str, str]:
+    """The string keys and values of a ``custom_data`` mapping (empty if it is none)."""
     if not isinstance(data, dict):
         return {}
     return {k: v for k, v in data.items() if isinstance(k, str) and isinstance(v, str)}
