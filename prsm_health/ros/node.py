@@ -163,8 +163,8 @@ class HealthNode(LifecycleNode):
         self._configure_failure_pub: Any = None
         self._configure_failure_timer: Any = None
         self._latest: HealthState | None = None  # the newest estimate
-        # The estimate restored with the state file while no new one came (else None).
-        self._restored: HealthState | None = None
+        # The newest estimate is the one restored with the state file (no new one came yet).
+        self._latest_restored = False
         self.finalized = False  # shut down (rclpy refuses a second shutdown transition)
         self._reset_run_state()
 
@@ -334,7 +334,8 @@ class HealthNode(LifecycleNode):
                 self.get_logger().warning(outcome.problem)
             # The diagnostics report it until the first new estimate (it is not published on
             # ~/health: it is no new estimate).
-            self._latest = self._restored = outcome.last_estimate
+            self._latest = outcome.last_estimate
+            self._latest_restored = self._latest is not None
         else:
             self.get_logger().info(f"no state file at {config.state_file}: starting fresh")
         self._config, self._estimator, self._store = config, estimator, store
@@ -430,7 +431,7 @@ class HealthNode(LifecycleNode):
         self._pending = _Pending()
         self._node_rejects: Counter[str] = Counter()
         self._tracker = DiagnosticsTracker()
-        self._latest = self._restored = None
+        self._latest, self._latest_restored = None, False
         self._latest_published = True
         self._frame_id = ""
         self._saved_at_samples = -1
@@ -503,8 +504,7 @@ class HealthNode(LifecycleNode):
         self._tracker.inputs.update(now, received, counters.accepted, rejected)
         self._tracker.events.observe(now, states, counters)
         if states:
-            self._latest = states[-1]
-            self._restored = None
+            self._latest, self._latest_restored = states[-1], False
             self._latest_published = False
             if config.health_rate_hz == 0.0:
                 for state in states:
@@ -533,8 +533,8 @@ class HealthNode(LifecycleNode):
             statuses = self._tracker.statuses(
                 self._latest, config.estimator, config.hardware_id, now
             )
-            if self._restored is not None:
-                statuses = restored_statuses(statuses, self._restored.stamp_s)
+            if self._latest_restored and self._latest is not None:
+                statuses = restored_statuses(statuses, self._latest.stamp_s)
             statuses.append(persistence_status(self._persistence, config.hardware_id, now))
             self._diagnostics_pub.publish(diagnostic_array(statuses, now))
         except Exception as exc:
@@ -560,7 +560,7 @@ class HealthNode(LifecycleNode):
             reset_state = estimator.current_state()  # None before the first estimate
             after = [reset_state] if reset_state is not None else []
             if reset_state is None:  # a restored estimate no longer holds
-                self._latest = self._restored = None
+                self._latest, self._latest_restored = None, False
             self._handle_estimates(estimator, config, before + after, 0)
             reset = [f"jammed rollers {request.jammed_rollers}"]
             reset += ["precision loss 0"] if request.reset_precision_loss else []
