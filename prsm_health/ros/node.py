@@ -79,6 +79,7 @@ from prsm_health.ros.parameters import (
     NodeConfig,
     ParameterSpec,
     node_config,
+    usage,
 )
 from prsm_health.ros.persistence import StateStore
 from prsm_health.ros.runtime import ros_session
@@ -618,6 +619,9 @@ def main(argv: Sequence[str] | None = None) -> int:
     except _rclpy.UnknownROSArgsError as exc:  # e.g. --ros-args --garbage; str: the list
         print(f"prsm-health-node: invalid --ros-args: unknown ROS arguments {exc}", file=sys.stderr)
         return 2
+    if extra in (["--help"], ["-h"]):
+        print(usage())
+        return 0
     if extra:
         print(
             f"prsm-health-node: unexpected arguments {extra}; parameters go after --ros-args,"

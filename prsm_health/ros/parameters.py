@@ -141,6 +141,32 @@ PARAMETERS: tuple[ParameterSpec, ...] = (
 )
 SPECS = {spec.name: spec for spec in PARAMETERS}
 
+
+def usage() -> str:
+    """``prsm-health-node --help``: how to start it and every parameter, from :data:`PARAMETERS`."""
+    lines = [
+        "usage: prsm-health-node [--ros-args -p NAME:=VALUE ...]",
+        "",
+        "The PRSM health node: estimates from motor samples, published on ~/health and",
+        "/diagnostics (docs/ros.md). Parameters (name, default, allowed values, meaning):",
+    ]
+    for spec in PARAMETERS:
+        allowed = ""
+        if spec.choices:
+            allowed = f" {{{', '.join(spec.choices)}}}"
+        elif spec.bounds is not None:
+            allowed = f" [{spec.bounds[0]:g}, {spec.bounds[1]:g}]"
+        default = repr(spec.default) if isinstance(spec.default, str) else spec.default
+        read_only = "; read-only" if spec.read_only else ""
+        lines.append(f"  {spec.name} = {default}{allowed}{read_only}")
+        lines.append(f"      {spec.description}")
+    lines.append("  use_sim_time = False")
+    lines.append(
+        "      follow /clock instead of the wall clock (e.g. with prsm-health play --clock)"
+    )
+    return "\n".join(lines)
+
+
 InputType = Literal["motor_state", "joint_state"]
 EffortIs = Literal["current", "torque"]
 InputQos = Literal["sensor_data", "reliable"]

@@ -12,6 +12,7 @@ from rcl_interfaces.srv import SetParametersAtomically
 from rclpy.parameter import Parameter
 
 from prsm_health.outputs import CONFIGURATION, INPUT_HEALTH
+from prsm_health.ros.parameters import PARAMETERS
 from test.ros.harness import Listener, NodeProcess, stop_process
 
 
@@ -208,6 +209,17 @@ def test_a_misspelt_parameter_fails_configure_by_name(ros: None, tmp_path: Path)
         node.wait_log("configure failed")
         assert "input_topc: unknown parameter (did you mean input_topic?)" in node.log()
         assert node.alive()
+
+
+@pytest.mark.parametrize("flag", ["--help", "-h"])
+def test_help_lists_every_parameter_and_exits_0(flag: str) -> None:
+    """--help was an "unexpected argument" with exit code 2."""
+    command = [sys.executable, "-m", "prsm_health.ros.node", flag]
+    result = subprocess.run(command, capture_output=True, text=True, timeout=60, check=False)
+    assert result.returncode == 0, result.stderr
+    assert result.stdout.startswith("usage: prsm-health-node [--ros-args -p NAME:=VALUE ...]")
+    for spec in PARAMETERS:
+        assert f"\n  {spec.name} = " in result.stdout
 
 
 @pytest.mark.parametrize(
