@@ -17,6 +17,8 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
 
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
@@ -30,7 +32,7 @@ from prsm_health.physics.geometry import (
     require_real,
 )
 from prsm_health.physics.load_distribution import LoadingCase
-from prsm_health.physics.presets import Preset, load_preset
+from prsm_health.physics.presets import PRESET_NAMES, Preset, load_preset
 
 FloatArray = NDArray[np.float64]
 
@@ -222,3 +224,21 @@ def actuator_from_mapping(data: object) -> Actuator:
         case_reverse=_case(data.get("case_reverse", 1), "actuator.case_reverse"),
         wear_acceleration=data.get("wear_acceleration", 1.0),
     )
+
+
+def preset_beside_file(data: dict[str, Any], path: Path) -> dict[str, Any]:
+    """A parsed scene or params file read from ``path``, with ``actuator.preset`` taken from
+    that file's folder when it names a preset file by a relative path (as a file's references
+    are read; not from the working directory, which would make the file mean something else
+    in every folder it is used from). Bundled preset names, absolute paths and anything
+    malformed are left as they are, for :func:`actuator_from_mapping` to judge."""
+    section = data.get("actuator")
+    if not isinstance(section, dict):
+        return data
+    preset = section.get("preset")
+    if not isinstance(preset, str) or preset in PRESET_NAMES:
+        return data
+    preset_path = Path(preset)
+    if preset_path.is_absolute() or preset_path.suffix not in (".yaml", ".yml"):
+        return data
+    return {**data, "actuator": {**section, "preset": str(path.parent / preset_path)}}

@@ -28,12 +28,17 @@ from prsm_health.bags.reader import joint_names
 from prsm_health.bags.topics import MOTOR_FRAME
 from prsm_health.estimation.estimate import UM_PER_M
 from prsm_health.estimation.inputs import RejectReason
-from prsm_health.estimation.params import EstimatorParams, bundled_params_file, params_from_mapping
+from prsm_health.estimation.params import (
+    EstimatorParams,
+    bundled_params_file,
+    load_params_mapping,
+    params_from_mapping,
+)
 from prsm_health.interrupt import EXIT_INTERRUPTED, stop_on_interrupt
 from prsm_health.outputs import DEFAULT_HARDWARE_ID
 from prsm_health.replay import ReplayResult, replay
 from prsm_health.scenes.recording import SceneActuator, scene_actuator, usable_bag_actuator
-from prsm_health.yamlio import YamlError, load_yaml_mapping
+from prsm_health.yamlio import YamlError
 
 
 def add_replay_command(commands: Any) -> None:
@@ -92,7 +97,7 @@ def _params(args: argparse.Namespace) -> tuple[EstimatorParams, str, SceneActuat
     they hold, if any (module docstring)."""
     path = args.params or bundled_params_file()
     try:
-        data = load_yaml_mapping(path)
+        data = load_params_mapping(path)
     except YamlError as exc:
         raise ValueError(f"--params: {exc}") from exc
     try:

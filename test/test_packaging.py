@@ -120,8 +120,8 @@ def test_colcon_build_installs_both_packages(tmp_path: Path) -> None:
         "from rclpy.serialization import serialize_message;"
         "serialize_message(prsm_health_msgs.msg.MotorState());"
         "print(prsm_health.__file__); print(prsm_health_msgs.msg.__file__);"
-        "from prsm_health.ros.parameters import default_params_file;"
-        "print(default_params_file())"
+        "from prsm_health.estimation.params import bundled_params_file;"
+        "print(bundled_params_file())"
     )
     # Not from the repo root: `python -c` puts the working directory first on sys.path.
     out = run(

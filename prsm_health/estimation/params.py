@@ -21,7 +21,7 @@ from dataclasses import dataclass, field, fields
 from pathlib import Path
 from typing import Any, Literal
 
-from prsm_health.actuator import Actuator, actuator_from_mapping
+from prsm_health.actuator import Actuator, actuator_from_mapping, preset_beside_file
 from prsm_health.config import build_dataclass
 from prsm_health.physics.errors import ParameterError
 from prsm_health.physics.geometry import require, require_integer, require_real
@@ -403,10 +403,20 @@ def params_from_mapping(data: dict[str, Any]) -> EstimatorParams:
     return EstimatorParams(actuator=actuator_from_mapping(data["actuator"]), **sections)
 
 
+def load_params_mapping(path: Path) -> dict[str, Any]:
+    """A params YAML file parsed, its preset file (if it names one by a relative path) taken
+    from the file's folder (:func:`~prsm_health.actuator.preset_beside_file`).
+
+    Raises:
+        YamlError: the file cannot be read or parsed, or is no mapping.
+    """
+    return preset_beside_file(load_yaml_mapping(path), path)
+
+
 def load_params(path: Path) -> EstimatorParams:
     """Load a params YAML file; errors name the file (and the bad key)."""
     try:
-        return params_from_mapping(load_yaml_mapping(path))
+        return params_from_mapping(load_params_mapping(path))
     except YamlError as exc:
         raise ParameterError("params", str(exc)) from exc
     except ParameterError as exc:

@@ -24,16 +24,19 @@ from typing import Any, Literal
 from rclpy.exceptions import InvalidTopicNameException
 from rclpy.validate_topic_name import validate_topic_name
 
-from prsm_health.estimation.params import EstimatorParams, params_from_mapping
+from prsm_health.estimation.params import (
+    EstimatorParams,
+    bundled_params_file,
+    load_params_mapping,
+    params_from_mapping,
+)
 from prsm_health.outputs import DEFAULT_HARDWARE_ID
 from prsm_health.physics.errors import PhysicsError
 from prsm_health.ros.persistence import default_state_file
-from prsm_health.yamlio import YamlError, load_yaml_mapping
+from prsm_health.yamlio import YamlError
 
 PACKAGE = "prsm_health"
 NODE_NAME = "prsm_health"
-#: The bundled estimator parameters (installed to share/prsm_health/config).
-DEFAULT_PARAMS = Path("config", "default.yaml")
 _HARDWARE_ID = re.compile(r"[A-Za-z0-9_.\-]+")
 #: A slower ~/health timer than this is refused (its period in ns would overflow rcl's int64
 #: near 1e-10 Hz; nobody wants one estimate a minute either).
@@ -81,7 +84,11 @@ PARAMETERS: tuple[ParameterSpec, ...] = (
         "",
         "estimator parameters YAML (docs/estimation.md); empty: the bundled config/default.yaml",
     ),
-    ParameterSpec("preset", "", "PRSM preset name or YAML path; overrides actuator.preset"),
+    ParameterSpec(
+        "preset",
+        "",
+        "PRSM preset name or YAML path (from the working directory); overrides actuator.preset",
+    ),
     ParameterSpec(
         "hardware_id",
         DEFAULT_HARDWARE_ID,
@@ -209,22 +216,8 @@ class NodeConfig:
         return self.estimator.actuator.drive_train.torque_constant_nm_per_a
 
 
-def default_params_file() -> Path:
-    """The bundled estimator parameters: from the ament index (an installed package), else
-    from the source tree (an editable install or a checkout)."""
-    try:
-        from ament_index_python.packages import get_package_share_directory
-
-        installed = Path(get_package_share_directory(PACKAGE)) / DEFAULT_PARAMS
-        if installed.is_file():
-            return installed
-    except (ImportError, LookupError, OSError, ValueError):  # not installed via ament
-        pass
-    return Path(__file__).resolve().parents[2] / DEFAULT_PARAMS
-
-
 def _estimator_params(params_file: Path, preset: str) -> EstimatorParams:
-    data = load_yaml_mapping(params_file)
+    data = load_params_mapping(params_file)
     if preset:
         actuator = data.get("actuator")
         data["actuator"] = {**(actuator if isinstance(actuator, dict) else {}), "preset": preset}
@@ -266,7 +259,7 @@ def node_config(values: Mapping[str, Any], errors: Mapping[str, str] | None = No
     if problems:
         raise ConfigError(problems)
 
-    params_file = Path(values["params_file"]) if values["params_file"] else default_params_file()
+    params_file = Path(values["params_file"]) if values["params_file"] else bundled_params_file()
     try:
         estimator = _estimator_params(params_file, values["preset"])
     except (YamlError, PhysicsError, ValueError) as exc:

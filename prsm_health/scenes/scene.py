@@ -16,7 +16,7 @@ from typing import Any
 
 import yaml
 
-from prsm_health.actuator import Actuator, actuator_from_mapping
+from prsm_health.actuator import Actuator, actuator_from_mapping, preset_beside_file
 from prsm_health.physics.errors import ParameterError
 from prsm_health.scenes.drive import SpeedLoop
 from prsm_health.scenes.faults import SensorFaults, sensor_faults_from_mapping
@@ -204,7 +204,7 @@ def scene_names() -> tuple[str, ...]:
 def load_scene_file(path: Path) -> Scene:
     """Load a scene from a YAML file; errors name the file and the field."""
     try:
-        return scene_from_mapping(load_yaml_mapping(path))
+        return scene_from_mapping(preset_beside_file(load_yaml_mapping(path), path))
     except YamlError as exc:
         raise ParameterError("scene", str(exc)) from exc
     except ParameterError as exc:

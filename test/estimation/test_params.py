@@ -318,3 +318,23 @@ def test_drive_trains_at_the_edges_of_their_ranges_give_finite_estimates(
         for state in states:
             numbers = [v for v in dataclasses.astuple(state) if isinstance(v, float)]
             assert all(math.isfinite(v) for v in numbers), (key, value, state)
+
+
+def test_a_relative_preset_path_is_taken_from_the_params_files_folder(
+    tmp_path: Path, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    """As in a scene file: not from the working directory (the node's is wherever it was
+    launched)."""
+    bundled = Path(__file__).resolve().parents[2] / "prsm_health/physics/presets"
+    (tmp_path / "robot" / "presets").mkdir(parents=True)
+    text = (bundled / "dong2022-downhole.yaml").read_text()
+    preset = tmp_path / "robot" / "presets" / "mine.yaml"
+    preset.write_text(text.replace("name: dong2022-downhole", "name: mine"))
+    (tmp_path / "robot" / "params.yaml").write_text("actuator: {preset: presets/mine.yaml}\n")
+    elsewhere = tmp_path / "elsewhere"
+    elsewhere.mkdir()
+    monkeypatch.chdir(elsewhere)
+    assert load_params(Path("../robot/params.yaml")).actuator.preset.name == "mine"
+    preset.unlink()
+    with pytest.raises(ParameterError, match=re.escape(f"no such preset file '{preset.parent}")):
+        load_params(tmp_path / "robot" / "params.yaml")

@@ -22,9 +22,10 @@ import pytest
 
 from prsm_health.bags.reader import read_motor_samples
 from prsm_health.estimation.estimator import HealthEstimator
+from prsm_health.estimation.params import bundled_params_file
 from prsm_health.outputs import JAMMED_ROLLERS, STATUS_NAMES, health_estimate_fields
 from prsm_health.ros.parameters import PARAMETERS as SPECS
-from prsm_health.ros.parameters import default_params_file, node_config
+from prsm_health.ros.parameters import node_config
 from test.ros.data import short_jam_scene, simulated_bag
 from test.ros.harness import Listener, NodeProcess, play, stop_process
 
@@ -71,7 +72,7 @@ def run(ros: None, tmp_path_factory: pytest.TempPathFactory) -> Run:
     try:
         with NodeProcess(
             tmp,
-            params_file=str(default_params_file()),
+            params_file=str(bundled_params_file()),
             hardware_id=HARDWARE_ID,
             state_file=str(tmp / "state.json"),
             use_sim_time=True,

@@ -11,9 +11,8 @@ import pytest
 from prsm_health_msgs.srv import ResetAfterMaintenance
 
 from prsm_health.estimation.estimator import HealthEstimator
-from prsm_health.estimation.params import load_params, params_from_mapping
+from prsm_health.estimation.params import bundled_params_file, load_params, params_from_mapping
 from prsm_health.outputs import INPUT_HEALTH, JAMMED_ROLLERS, PERSISTENCE, health_estimate_fields
-from prsm_health.ros.parameters import default_params_file
 from prsm_health.ros.persistence import StateStore
 from test.ros.data import ORIGIN_S, synthetic_run, worn_params, write_bag
 from test.ros.harness import Listener, NodeProcess, play, start_player, stop_process
@@ -184,7 +183,7 @@ def test_corrupt_and_foreign_state_files_are_kept_aside(ros: None, tmp_path: Pat
     # Fresh states were saved at shutdown, beside the kept files.
     for name in ("corrupt", "foreign"):
         assert json.loads((tmp_path / f"{name}.json").read_text())["hardware_id"] == name
-        fresh = HealthEstimator(load_params(default_params_file()))
+        fresh = HealthEstimator(load_params(bundled_params_file()))
         assert StateStore(tmp_path / f"{name}.json", name).restore(fresh).restored
 
 

@@ -7,12 +7,12 @@ from typing import Any
 
 import pytest
 
+from prsm_health.estimation.params import bundled_params_file
 from prsm_health.outputs import CONFIGURATION, PERSISTENCE, STATUS_NAMES
 from prsm_health.ros.parameters import (
     PARAMETERS,
     SPECS,
     ConfigError,
-    default_params_file,
     node_config,
 )
 
@@ -25,7 +25,7 @@ def values(**changes: Any) -> dict[str, Any]:
 
 def test_defaults_make_a_valid_config() -> None:
     config = node_config(values(state_file="/var/lib/x.json"))
-    assert config.params_file == default_params_file() == REPO / "config" / "default.yaml"
+    assert config.params_file == bundled_params_file() == REPO / "config" / "default.yaml"
     assert config.estimator.actuator.preset.name == "dong2022-downhole"
     assert config.input_topic == "motor_state"
     assert config.health_rate_hz == 0.0

@@ -134,3 +134,24 @@ def test_a_valid_scene_file_loads_by_path(tmp_path: Path) -> None:
 def test_unknown_scene_names_are_refused() -> None:
     with pytest.raises(ParameterError, match="unknown scene 'nowhere'"):
         load_scene("nowhere")
+
+
+def test_a_relative_preset_path_is_taken_from_the_scene_files_folder(
+    tmp_path: Path, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    """It was taken from the working directory: the same scene file meant another actuator,
+    or none, in every folder it was used from."""
+    project = tmp_path / "project"
+    bundled = Path(__file__).resolve().parents[2] / "prsm_health/physics/presets"
+    (project / "presets").mkdir(parents=True)
+    text = (bundled / "dong2022-downhole.yaml").read_text()
+    (project / "presets" / "mine.yaml").write_text(
+        text.replace("name: dong2022-downhole", "name: mine")
+    )
+    scene = {**MINIMAL, "actuator": {"preset": "presets/mine.yaml"}}
+    (project / "scene.yaml").write_text(yaml.safe_dump(scene))
+    monkeypatch.chdir(tmp_path)
+    assert load_scene("project/scene.yaml").actuator.preset.name == "mine"
+    (tmp_path / "presets").mkdir()  # one beside the working directory is not read
+    (tmp_path / "presets" / "mine.yaml").write_text("not: a preset\n")
+    assert load_scene(str(project / "scene.yaml")).actuator.preset.name == "mine"
