@@ -137,7 +137,8 @@ class PersistenceHealth:
 
     restored: the estimator resumed from the file at configure. kept_corrupt: where an
     unusable state file was moved aside (None if none was), with the reason in problem; a
-    restored file's problem is a part of it not used (its last estimate).
+    restored file's problem is a part of it not used (its last estimate, or the filters' states
+    saved under other drive-train or model parameters).
     save_error: the last save failure (None after a successful save).
     """
 

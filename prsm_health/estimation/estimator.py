@@ -53,24 +53,32 @@ SNAPSHOT_LARGEST_COUNT = 2**62
 
 
 class SnapshotError(ValueError):
-    """A saved estimator state cannot be resumed (malformed, or of another actuator)."""
+    """A saved estimator state cannot be resumed (malformed, or of another screw)."""
+
+
+def _digest(parts: tuple[object, ...]) -> str:
+    return hashlib.sha256(repr(parts).encode()).hexdigest()[:16]
+
+
+def screw_fingerprint(params: EstimatorParams) -> str:
+    """A stable digest of the screw itself (geometry, materials, friction, wear, fatigue):
+    what the accumulated degradation and the jammed rollers belong to."""
+    preset = params.actuator.preset
+    return _digest((preset.geometry, preset.friction, preset.wear, preset.fatigue))
 
 
 def actuator_fingerprint(params: EstimatorParams) -> str:
-    """A stable digest of what the state depends on: geometry, materials, drive train."""
+    """A stable digest of what the filters' states depend on besides the screw: the drive
+    train, the misalignment and whether there are ripple states."""
     actuator = params.actuator
-    text = repr(
+    return _digest(
         (
-            actuator.preset.geometry,
-            actuator.preset.friction,
-            actuator.preset.wear,
-            actuator.preset.fatigue,
+            screw_fingerprint(params),
             actuator.drive_train,
             actuator.misalignment,
             params.radial_terms,
         )
     )
-    return hashlib.sha256(text.encode()).hexdigest()[:16]
 
 
 class HealthEstimator:
@@ -126,12 +134,13 @@ class HealthEstimator:
         """Everything needed to resume after a restart, as plain JSON-able data.
 
         The hypotheses' filter states, ripple axes and probabilities, the accumulated
-        degradation, the input counters, and a fingerprint of the actuator: :meth:`restore`
-        refuses a snapshot of another geometry or drive train.
+        degradation, the input counters, and fingerprints of the screw and of the rest of the
+        actuator (:meth:`restore` says what it does with them).
         """
         bank = self._bank
         return {
             "format": SNAPSHOT_FORMAT,
+            "screw": screw_fingerprint(self.params),
             "actuator": actuator_fingerprint(self.params),
             "hypotheses": [
                 {
@@ -150,16 +159,31 @@ class HealthEstimator:
             "samples_rejected": self.counters.rejected,
         }
 
-    def restore(self, snapshot: dict[str, Any]) -> None:
-        """Resume from :meth:`snapshot`; raises SnapshotError if it does not fit (nothing is
-        changed then). The first block after it follows a hole of unknown length."""
+    def restore(self, snapshot: dict[str, Any]) -> bool:
+        """Resume from :meth:`snapshot`. The first block after it follows a hole of unknown
+        length.
+
+        A snapshot of the same screw whose drive train, misalignment or ripple states differ
+        (the parameters were changed between the save and now, e.g. a recalibrated torque
+        constant) resumes what belongs to the screw, the accumulated degradation and the
+        jam-count probabilities, and starts the filters' states (load, ripple) afresh: they
+        were estimated through the old parameters.
+
+        Returns:
+            Whether the filters' states were resumed too (False: only the screw's part).
+
+        Raises:
+            SnapshotError: the snapshot is malformed or of another screw (nothing is changed
+                then).
+        """
         try:
             if snapshot["format"] != SNAPSHOT_FORMAT:
                 raise SnapshotError(f"format {snapshot['format']!r}, expected {SNAPSHOT_FORMAT}")
-            if snapshot["actuator"] != actuator_fingerprint(self.params):
+            whole = bool(snapshot["actuator"] == actuator_fingerprint(self.params))
+            if not whole and snapshot.get("screw") != screw_fingerprint(self.params):
                 raise SnapshotError(
-                    "the state belongs to another actuator (preset, geometry or drive train "
-                    "differ): refusing to resume from it"
+                    "the state belongs to another screw (the preset's geometry, materials, "
+                    "friction, wear or fatigue differ): refusing to resume from it"
                 )
             dim = self._model.dim
             states = []
@@ -175,12 +199,15 @@ class HealthEstimator:
                     axis = np.asarray(axis, dtype=np.float64)
                     if axis.shape != (2,) or not abs(float(axis @ axis) - 1.0) < 1e-9:
                         raise SnapshotError(f"hypothesis {k}: ripple_axis is not a unit 2-vector")
-                valid = (
-                    0 <= k <= self._bank.n_rollers
-                    and x.shape == (dim,)
+                filter_state_ok = (  # not used when the filters start afresh
+                    x.shape == (dim,)
                     and p.shape == (dim, dim)
                     and np.all(np.abs(x) < SNAPSHOT_LARGEST_VALUE)  # NaN fails too
                     and np.all(np.abs(p) < SNAPSHOT_LARGEST_VALUE)
+                )
+                valid = (
+                    0 <= k <= self._bank.n_rollers
+                    and (filter_state_ok or not whole)
                     and (saved is None or -math.inf < log_probability <= 0.0)
                 )
                 if not valid:
@@ -208,12 +235,16 @@ class HealthEstimator:
                 f"sample counters: {len(self.counters.rejected)} rejection reasons expected, "
                 f"each count in [0, 2^62), got {len(rejected)} reasons, counts {counts}"
             )
-        self._bank.restore(states)
+        if whole:
+            self._bank.restore(states)
+        else:
+            self._bank.restart_filters([(state[0], state[4]) for state in states])
         self._degradation.state = degradation
         self.counters.accepted = accepted
         self.counters.rejected = rejected
         self._resumed = True
         self._last = None
+        return whole
 
     def reset_after_maintenance(
         self, jammed_rollers: int, *, reset_precision_loss: bool, reset_fatigue_damage: bool

@@ -688,6 +688,23 @@ class JamHypotheses:
         ]
         self._normalise()
 
+    def restart_filters(self, counts: list[tuple[int, float]]) -> None:
+        """The jam counts with the log probabilities given (count, log probability; several
+        of one count add up), each filtered afresh from the initial state, as at the start:
+        a state restored for other drive-train or model parameters (HealthEstimator.restore).
+        With pruning the counts of probability zero are left out, without it they stay."""
+        log_probability = dict.fromkeys(range(self.n_rollers + 1), -math.inf)
+        for count, log_prob in counts:
+            log_probability[count] = float(np.logaddexp(log_probability[count], log_prob))
+        self._spare_filters += [h.filter for h in self.hypotheses]
+        x, p = np.zeros(self._dim), np.diag(self._initial_var)
+        self.hypotheses = [
+            Hypothesis(k, self._new_filter(x, p), log_prob)
+            for k, log_prob in log_probability.items()
+            if math.isfinite(log_prob) or not self._prune
+        ]
+        self._normalise()
+
     def reinitialise_load(self, *, keep_load: bool = False) -> None:
         """Forget the load's derivatives, and unless ``keep_load`` the load too (after a time
         reset or a divergence; after a hole in the data, where the load may have moved on).

@@ -17,10 +17,12 @@ power loss the file is either the old or the new state, never a mix.
 
 Restoring: a missing file means a fresh start. A file that cannot be used (not JSON, not this
 format, another hardware_id, or refused by :meth:`HealthEstimator.restore`: malformed, or
-another actuator's geometry) is moved aside to ``<name>.corrupt-<UTC time>`` and reported;
-the estimator then starts fresh. A bad file is therefore never silently replaced by zeros. A
-malformed ``last_estimate`` alone (or one of another version, with other fields) loses only
-itself: the state is restored and the problem reported (:attr:`RestoreOutcome.problem`).
+another screw's) is moved aside to ``<name>.corrupt-<UTC time>`` and reported; the estimator
+then starts fresh. A bad file is therefore never silently replaced by zeros. A state of the
+same screw saved under another drive train, misalignment or ripple setting resumes the
+screw's part (degradation, jam counts; the restore says so in :attr:`RestoreOutcome.problem`).
+A malformed ``last_estimate`` alone (or one of another version, with other fields) loses only
+itself: the state is restored and the problem reported.
 """
 
 from __future__ import annotations
@@ -39,6 +41,13 @@ from prsm_health.estimation.estimate import EstimateEvent, HealthState
 from prsm_health.estimation.estimator import HealthEstimator, SnapshotError
 
 FORMAT = "prsm_health.state/1"
+#: The problem of a state file restored for the same screw under other parameters
+#: (:meth:`HealthEstimator.restore`).
+PARAMETERS_CHANGED = (
+    "the drive train, misalignment or ripple states differ from the saved state's: the "
+    "precision loss, fatigue damage and jam-count probabilities are resumed, the load is "
+    "estimated afresh"
+)
 
 
 def default_state_file(hardware_id: str) -> Path:
@@ -50,7 +59,8 @@ def default_state_file(hardware_id: str) -> Path:
 @dataclass(frozen=True)
 class RestoreOutcome:
     """What :meth:`StateStore.restore` did: resumed (with the last estimate saved, if any;
-    ``problem`` says why one saved was not used), started fresh, or kept a bad file aside
+    ``problem`` says what of the file was not used: a malformed last estimate, or the filters'
+    states saved under other parameters), started fresh, or kept a bad file aside
     (``problem`` says why)."""
 
     restored: bool
@@ -109,17 +119,18 @@ class StateStore:
             return self._keep_aside(f"unreadable state file {self.path}: {exc}")
         try:
             document = json.loads(text)
-            estimator.restore(self._snapshot(document))
+            whole = estimator.restore(self._snapshot(document))
         except ValueError as exc:  # JSONDecodeError and SnapshotError are ValueErrors
             return self._keep_aside(f"unusable state file {self.path}: {exc}")
         except RecursionError:  # json.loads of lists nested thousands deep
             return self._keep_aside(f"unusable state file {self.path}: nested too deeply")
+        partly = "" if whole else PARAMETERS_CHANGED
         try:
             last_estimate = _estimate(document.get("last_estimate"))
         except SnapshotError as exc:  # only the diagnostics' copy: the state is restored
             problem = f"the last estimate of {self.path} is not used: {exc}"
-            return RestoreOutcome(restored=True, problem=problem)
-        return RestoreOutcome(restored=True, last_estimate=last_estimate)
+            return RestoreOutcome(restored=True, problem="; ".join(filter(None, (partly, problem))))
+        return RestoreOutcome(restored=True, problem=partly, last_estimate=last_estimate)
 
     def _snapshot(self, document: Any) -> dict[str, Any]:
         if not isinstance(document, dict) or document.get("format") != FORMAT:

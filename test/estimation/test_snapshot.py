@@ -32,7 +32,7 @@ def test_a_restored_estimator_continues_the_precision_loss() -> None:
     before = first.process(moving(3.0))
     saved = json.loads(json.dumps(first.snapshot()))  # survives JSON
     resumed = HealthEstimator(params())
-    resumed.restore(saved)
+    assert resumed.restore(saved) is True  # the whole state
     after = resumed.process(moving(1.0, start_s=3.0))
     assert before[-1].precision_loss_m > 0.0
     assert after[0].precision_loss_m >= before[-1].precision_loss_m
@@ -56,11 +56,57 @@ def test_the_ripple_axes_survive_a_restart() -> None:
     assert all(h.ripple_axis is None for h in resumed._bank.hypotheses)
 
 
-def test_a_state_of_another_actuator_is_refused() -> None:
+def test_a_state_of_another_screw_is_refused() -> None:
     saved = HealthEstimator(params()).snapshot()
     # Said as it is (it read "malformed state: SnapshotError('the state belongs to ...')").
-    with pytest.raises(SnapshotError, match=r"^the state belongs to another actuator"):
+    with pytest.raises(SnapshotError, match=r"^the state belongs to another screw"):
         HealthEstimator(params("li2020-jamming")).restore(saved)
+
+
+def _changed(base: EstimatorParams, change: str) -> EstimatorParams:
+    actuator = base.actuator
+    if change == "drive train":
+        drive_train = dataclasses.replace(actuator.drive_train, torque_constant_nm_per_a=0.2)
+        return dataclasses.replace(
+            base, actuator=dataclasses.replace(actuator, drive_train=drive_train)
+        )
+    # No ripple states: the filters' states have another dimension.
+    return dataclasses.replace(base, fidelity=Fidelity(radial_terms="off"))
+
+
+@pytest.mark.parametrize("change", ["drive train", "ripple states"])
+def test_the_same_screw_under_other_parameters_keeps_its_degradation_and_jams(change: str) -> None:
+    """A recalibrated torque constant set the whole state aside as unusable: the precision
+    loss and fatigue accumulated over the screw's life and its known jams were lost."""
+    first = HealthEstimator(params())
+    first.process(moving(3.0))
+    first.reset_after_maintenance(2, reset_precision_loss=False, reset_fatigue_damage=False)
+    worn = first._degradation.state
+    assert worn.precision_loss_m > 0.0 and worn.fatigue_damage > 0.0
+    saved = json.loads(json.dumps(first.snapshot()))
+    other = _changed(params(), change)
+    resumed = HealthEstimator(other)
+    assert resumed.restore(saved) is False  # only the screw's part
+    assert resumed._degradation.state == worn
+    assert [(h.count, h.log_prob) for h in resumed._bank.hypotheses] == [(2, 0.0)]
+    fresh = HealthEstimator(other)._bank.hypotheses[0].filter
+    np.testing.assert_array_equal(resumed._bank.hypotheses[0].filter.x, fresh.x)
+    np.testing.assert_array_equal(resumed._bank.hypotheses[0].filter.P, fresh.P)
+    after = resumed.process(moving(1.0, start_s=3.0))
+    assert after and all(math.isfinite(s.axial_load_n) for s in after)
+    assert after[0].precision_loss_m >= worn.precision_loss_m
+
+
+def test_an_unpruned_bank_restarts_every_count_with_its_probability() -> None:
+    unpruned = dataclasses.replace(params(), fidelity=Fidelity(prune_hypotheses=False))
+    saved = HealthEstimator(unpruned).snapshot()
+    saved["hypotheses"][0]["log_probability"] = math.log(0.25)
+    saved["hypotheses"][1]["log_probability"] = math.log(0.75)
+    resumed = HealthEstimator(_changed(unpruned, "drive train"))
+    assert resumed.restore(saved) is False
+    probabilities = [math.exp(h.log_prob) for h in resumed._bank.hypotheses]
+    assert [h.count for h in resumed._bank.hypotheses] == list(range(11))
+    assert probabilities[:2] == pytest.approx([0.25, 0.75]) and sum(probabilities[2:]) == 0.0
 
 
 @pytest.mark.parametrize(

@@ -171,7 +171,7 @@ def test_corrupt_and_foreign_state_files_are_kept_aside(ros: None, tmp_path: Pat
 
     for name, problem, text in (
         ("corrupt", "unusable state file", corrupt_text),
-        ("foreign", "another actuator", foreign_text),
+        ("foreign", "another screw", foreign_text),
     ):
         status = listener.statuses(name)[PERSISTENCE]
         kept = Path(status["values"]["kept_corrupt"])

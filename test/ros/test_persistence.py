@@ -14,7 +14,12 @@ import pytest
 from prsm_health.estimation.estimator import HealthEstimator
 from prsm_health.estimation.params import EstimatorParams, params_from_mapping
 from prsm_health.outputs import Level, PersistenceHealth, persistence_status
-from prsm_health.ros.persistence import FORMAT, StateStore, default_state_file
+from prsm_health.ros.persistence import (
+    FORMAT,
+    PARAMETERS_CHANGED,
+    StateStore,
+    default_state_file,
+)
 from test.ros.data import synthetic_run
 
 
@@ -175,6 +180,32 @@ def test_values_the_outputs_cannot_carry_are_kept_aside(
     assert outcome.kept_corrupt is not None and problem in outcome.problem
 
 
+def test_state_of_the_same_screw_under_another_drive_train_is_resumed_in_part(
+    tmp_path: Path, params: EstimatorParams, worn: HealthEstimator
+) -> None:
+    """It was set aside as an "unusable state file" (the node started from zero wear)."""
+    store = StateStore(tmp_path / "left.json", "left")
+    store.save(worn, worn.current_state())
+    recalibrated = params_from_mapping(
+        {
+            "actuator": {
+                "preset": "dong2022-downhole",
+                "wear_acceleration": 1e6,
+                "drive_train": {"torque_constant_nm_per_a": 0.2},
+            }
+        }
+    )
+    fresh = HealthEstimator(recalibrated)
+    outcome = store.restore(fresh)
+    assert outcome.restored and outcome.kept_corrupt is None
+    assert outcome.problem == PARAMETERS_CHANGED and outcome.last_estimate is not None
+    assert fresh.snapshot()["degradation"] == worn.snapshot()["degradation"]
+    assert list(tmp_path.iterdir()) == [store.path]
+    health = PersistenceHealth(str(store.path), restored=True, problem=outcome.problem)
+    status = persistence_status(health, "left", 0.0)
+    assert status.message == f"resumed from the state file; {PARAMETERS_CHANGED}"
+
+
 def test_state_of_another_actuator_or_hardware_is_refused(
     tmp_path: Path, params: EstimatorParams, worn: HealthEstimator
 ) -> None:
@@ -182,7 +213,7 @@ def test_state_of_another_actuator_or_hardware_is_refused(
     StateStore(tmp_path / "left.json", "left").save(other)
     outcome = StateStore(tmp_path / "left.json", "left").restore(HealthEstimator(params))
     assert outcome.kept_corrupt is not None
-    assert "another actuator" in outcome.problem
+    assert "another screw" in outcome.problem
 
     StateStore(tmp_path / "right.json", "right").save(worn)
     os.replace(tmp_path / "right.json", tmp_path / "left.json")
