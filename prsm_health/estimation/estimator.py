@@ -292,15 +292,17 @@ class HealthEstimator:
         )
         return before
 
-    def current_state(self) -> HealthState | None:
+    def current_state(self, saved: HealthState | None = None) -> HealthState | None:
         """The latest estimate brought up to the state now, e.g. after
         :meth:`reset_after_maintenance`: jam probabilities, degradation, sample counters and
         mean NIS (0 while its window is empty) as they are now; the stamp, load, friction,
         efficiency and speed of the last estimated block, which no later sample has changed;
-        event NONE (no new block). None before the first estimate (also after a restore)."""
-        if self._last is None:
+        event NONE (no new block). Before the first estimate (also after a restore) the same
+        of ``saved``, an estimate saved with a restored state (the node keeps one), or None."""
+        last = self._last if self._last is not None else saved
+        if last is None:
             return None
-        return dataclasses.replace(self._last, event=EstimateEvent.NONE, **self._standing_fields())
+        return dataclasses.replace(last, event=EstimateEvent.NONE, **self._standing_fields())
 
     def process(self, samples: MotorSamples) -> list[HealthState]:
         """Feed samples (any number); returns the estimates of the blocks they complete."""

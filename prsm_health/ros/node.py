@@ -558,10 +558,10 @@ class HealthNode(LifecycleNode):
                 reset_precision_loss=request.reset_precision_loss,
                 reset_fatigue_damage=request.reset_fatigue_damage,
             )
-            reset_state = estimator.current_state()  # None before the first estimate
+            # After a restart without input since, the saved estimate brought up to the reset.
+            restored = self._latest if self._latest_restored else None
+            reset_state = estimator.current_state(restored)  # None: no estimate at all yet
             after = [reset_state] if reset_state is not None else []
-            if reset_state is None:  # a restored estimate no longer holds
-                self._latest, self._latest_restored = None, False
             self._handle_estimates(estimator, config, before + after, 0)
             reset = [f"jammed rollers {request.jammed_rollers}"]
             reset += ["precision loss 0"] if request.reset_precision_loss else []

@@ -198,8 +198,8 @@ def _reset(listener: Listener, jammed_rollers: int) -> None:
 def test_the_restored_estimate_is_reported_until_a_new_one(ros: None, tmp_path: Path) -> None:
     """A restart said "stale: no input yet; last: no estimate yet" of a state with 2 jammed
     rollers: the diagnostics report the last estimate saved with the state, marked restored,
-    until the node makes a new one; a restart without input keeps it; a reset that leaves no
-    estimate behind drops it."""
+    until the node makes a new one; a restart without input keeps it; a reset before any input
+    brings it up to the reset (it dropped it, and with it the fatigue damage the reset kept)."""
     state_file = tmp_path / "state.json"
     bag = write_bag(tmp_path / "run", synthetic_run(1.0))
     node_parameters = {
@@ -244,15 +244,24 @@ def test_the_restored_estimate_is_reported_until_a_new_one(ros: None, tmp_path: 
                 assert stop_process(node.process) == 0
             assert json.loads(state_file.read_text())["last_estimate"] == saved
 
+        listener.health.clear()
         with NodeProcess(tmp_path, **node_parameters) as node:
             node.wait_log("resumed from")
             listener.wait_matched()
-            _reset(listener, 0)  # no estimate of this run: the restored one no longer holds
+            _reset(listener, 0)  # no input in this run: the restored estimate, reset
             listener.wait_for(
-                lambda: jam_status().get("message") == "stale: no input yet; last: no estimate yet",
+                lambda: (
+                    jam_status().get("message")
+                    == "stale: no input yet; last: no jammed roller (p(jam) = 0)"
+                ),
                 10.0,
-                "the restored estimate dropped",
+                "the restored estimate brought up to the reset",
             )
-        assert json.loads(state_file.read_text())["last_estimate"] is None
+            published = listener.health[-1]
+        after = json.loads(state_file.read_text())["last_estimate"]
+        assert after["jam_probabilities"][0] == 1 and after["stamp_s"] == saved["stamp_s"]
+        assert after["fatigue_damage"] == saved["fatigue_damage"] > 0.0  # kept by the reset
+        assert published["jammed_rollers_most_likely"] == 0
+        assert published["fatigue_damage"] == pytest.approx(saved["fatigue_damage"])
     finally:
         listener.close()
