@@ -823,18 +823,21 @@ class _Bench:
         self, scene: BenchScene, samples: MotorSamples, truth: TruthSamples
     ) -> list[float] | None:
         """The evidence for each of the run's onsets under the default configuration's model
-        (None without onsets or without a motion cycle)."""
+        (None without onsets or without a motion cycle). The onsets are split at the scene's
+        jam times, not at the decimated truth's (up to a truth period later: the samples
+        before that stamp would already hold the jam's step, under the count before it)."""
         cycle = cycle_period_s(scene.scene)
         if not len(truth.jam_onsets) or cycle is None:
             return None
         begin = time.perf_counter()
         params = params_for(scene.scene, Fidelity(), base=self.base)
-        onsets = truth.jam_onsets
+        counts = truth.jammed_rollers[truth.jam_onsets].tolist()
+        jam_times_s = sorted(jam.time_s for jam in scene.scene.jams)
         evidence = onset_evidence(
             params,
             samples,
-            truth.stamp_s[onsets].tolist(),
-            truth.jammed_rollers[onsets].tolist(),
+            [jam_times_s[count - 1] for count in counts],
+            counts,
             window_s=cycle,
         )
         self.progress(f"{scene.name} evidence per onset: {time.perf_counter() - begin:.1f} s")
