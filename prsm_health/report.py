@@ -7,7 +7,8 @@ truth, inside its own +-2 std: readable where an hour of strokes makes the first
 block), ``jams.png`` (probability of each jam count over time, the true count on top),
 ``precision_loss.png`` (estimate +-2 std, cut at zero, and the truth) and ``index.html`` (the
 three plots and the metrics). The truth is drawn wide, dashed and pale under the estimate's
-line, so that both show where they coincide. After a sensor time reset the estimates are
+line, so that both show where they coincide. Sensor time resets and divergence recoveries are
+marked by vertical lines on every plot. After a sensor time reset the estimates are
 drawn on the truth's clock, shifted by the offsets the metrics found (the x label says by how
 much). matplotlib's Agg backend: no display needed.
 """
@@ -27,6 +28,7 @@ import numpy as np
 from matplotlib.artist import Artist
 from matplotlib.axes import Axes
 from matplotlib.figure import Figure
+from matplotlib.lines import Line2D
 from matplotlib.ticker import MaxNLocator
 from numpy.typing import NDArray
 
@@ -56,6 +58,7 @@ class _Series:
     loss_um: FloatArray
     loss_std_um: FloatArray
     moving: NDArray[np.bool_]  # not a standstill block of the estimator
+    events: NDArray[np.int64]  # EstimateEvent of each estimate
 
 
 def _series(states: list[HealthState], clock_offsets_s: tuple[float, ...] | None) -> _Series:
@@ -71,7 +74,30 @@ def _series(states: list[HealthState], clock_offsets_s: tuple[float, ...] | None
         loss_um=np.array([s.precision_loss_m for s in states]) * UM_PER_M,
         loss_std_um=np.array([s.precision_loss_std_m for s in states]) * UM_PER_M,
         moving=np.array([s.event != EstimateEvent.STANDSTILL for s in states], dtype=bool),
+        events=np.array([s.event for s in states], dtype=np.int64),
     )
+
+
+#: The estimates' events marked on every plot, with their line styles.
+MARKED_EVENTS = {
+    EstimateEvent.TIME_RESET: ("sensor time reset", "tab:red", ":"),
+    EstimateEvent.DIVERGENCE_RECOVERED: ("load re-initialised (divergence)", "tab:purple", "-."),
+}
+
+
+def _mark_events(axis: Axes, series: _Series) -> list[Line2D]:
+    """A vertical line at each estimate that starts a new time line or re-initialised the
+    load: what the curves do there is no estimate of the plant. Returns the first line of
+    each kind (the legend's entries)."""
+    first = []
+    for event, (label, colour, style) in MARKED_EVENTS.items():
+        for i, time_s in enumerate(series.stamp_s[series.events == event]):
+            line = axis.axvline(time_s, color=colour, ls=style, lw=1.0, label=label)
+            if i == 0:
+                first.append(line)
+            else:
+                line.set_label(f"_{label}")  # one legend entry per kind
+    return first
 
 
 def _band(
@@ -130,6 +156,7 @@ def _load_figure(series: _Series, truth: TruthSamples | None, *, xlabel: str, ti
             loc="lower right", bbox_to_anchor=(1.0, 1.0), ncols=2, fontsize=8, frameon=False
         )
     _band(axis, t, series.load_kn, series.load_std_kn, "estimate")
+    _mark_events(axis, series)
     shown = series.load_kn
     if truth is not None:
         _truth(axis, truth.stamp_s, truth.axial_load_n / 1e3)
@@ -181,6 +208,7 @@ def write_report(
         axis2.set_ylabel("true jammed rollers")
         axis2.set_ylim(-0.1, max(2, int(truth.jammed_rollers.max()) + 1))
         axis2.yaxis.set_major_locator(MaxNLocator(integer=True))
+    handles += _mark_events(axis, series)
     axis.set(xlabel=xlabel, ylabel="probability", ylim=(0, 1), title=f"{title}: jams")
     # Below the axes: inside, it would cover the probabilities it names.
     axis.legend(handles=handles, loc="upper center", bbox_to_anchor=(0.5, -0.15), ncols=6)
@@ -188,6 +216,7 @@ def write_report(
 
     figure, axis = plt.subplots(figsize=(10, 4))
     _band(axis, t, series.loss_um, series.loss_std_um, "estimate", non_negative=True)
+    _mark_events(axis, series)
     if truth is not None:
         _truth(axis, truth.stamp_s, truth.precision_loss_m * UM_PER_M)
     axis.set(xlabel=xlabel, ylabel="precision loss [µm]", title=f"{title}: precision loss")

@@ -156,6 +156,11 @@ def test_the_report_draws_the_estimates_on_the_truths_clock_after_a_time_reset()
     assert rms_error_kn(on_sensor_clock.stamp_s[after], on_sensor_clock.load_kn[after]) > 2.0
     assert np.array_equal(drawn.stamp_s[: reset[0]], on_sensor_clock.stamp_s[: reset[0]])
 
+    # The reset is marked where it is drawn (nothing showed where the time line restarted).
+    figure = _load_figure(drawn, truth, xlabel="t", title="sensor-faults")
+    marks = [line for line in figure.axes[0].get_lines() if line.get_label() == "sensor time reset"]
+    assert [line.get_xdata()[0] for line in marks] == [drawn.stamp_s[reset[0]]]
+
 
 def test_cli_writes_report_and_metrics_and_exits_1_on_damage(
     bag: Path, tmp_path: Path, capsys: pytest.CaptureFixture[str]
