@@ -302,8 +302,14 @@ def summary(bag: Path, source: str, result: ReplayResult) -> str:
             if math.isfinite(metrics.load_rmse_percent_rated)
             else "no load estimate in motion to score"
         )
+        lines.append(f"  vs truth: {load}")
+        if math.isfinite(metrics.load_standstill_rmse_n):  # hardly observed: its band matters
+            lines.append(
+                f"  load at standstill: RMSE {metrics.load_standstill_rmse_n:.0f} N "
+                f"(max {metrics.load_standstill_max_error_n:.0f} N), truth within 2 sigma "
+                f"{100 * metrics.load_standstill_coverage_2sigma:.0f} % of its estimates"
+            )
         lines += [
-            f"  vs truth: {load}",
             f"  jams: {jams}, false declarations {metrics.false_jam_declarations}; {loss}, "
             f"2-sigma coverage {100 * metrics.precision_loss_coverage_2sigma:.0f} %",
         ]

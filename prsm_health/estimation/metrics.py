@@ -7,7 +7,10 @@ precision loss: during a load ramp of 100 kN/s a 10 ms offset would be a 1 kN er
 Definitions:
 
 - load errors: over estimates while the screw moves (|w_s| above 1 % of the preset's largest
-  speed), signed load estimate minus signed truth; RMSE and max, also as % of the rated load;
+  speed), signed load estimate minus signed truth; RMSE and max, also as % of the rated load.
+  At standstill (the other estimates) the load is hardly observed, the static friction
+  taking any share of the holding torque: its RMSE, max and the fraction of those estimates
+  whose truth lies within +-2 std, so that a standstill is scored for the honesty of its band;
 - NEES: (error / std)^2 of the load while moving with a true load of at least
   NEES_MIN_LOAD_FRACTION of the rated load (below, at the ends of the downhole strokes, the
   radial load is largest in proportion and the angle-averaged model least exact). The test of
@@ -75,6 +78,9 @@ class Metrics:
     load_nees_mean: float
     load_nees_interval: tuple[float, float]
     load_nees_consistent: bool
+    load_standstill_rmse_n: float
+    load_standstill_max_error_n: float
+    load_standstill_coverage_2sigma: float
     jams: tuple[JamDetection, ...]
     false_jam_declarations: int
     false_jam_seconds: float
@@ -120,8 +126,10 @@ def score(
     moving = np.abs(speed) > MOVING_FRACTION * largest_screw_speed_rad_s
     true_load = interpolated(truth.axial_load_n)
     error = load - true_load
-    moving_error = error[moving]
-    rmse = float(np.sqrt(np.mean(moving_error**2))) if moving_error.size else math.nan
+    moving_error, still_error = error[moving], error[~moving]
+    rmse, still_rmse = (
+        float(np.sqrt(np.mean(e**2))) if e.size else math.nan for e in (moving_error, still_error)
+    )
     loaded = moving & (np.abs(true_load) >= NEES_MIN_LOAD_FRACTION * rated_load_n)
     nees = (error[loaded] / np.maximum(load_std[loaded], 1e-9)) ** 2
     nees_mean, interval, consistent = _nees_test(stamps[loaded], nees)
@@ -147,6 +155,15 @@ def score(
         load_nees_mean=nees_mean,
         load_nees_interval=interval,
         load_nees_consistent=consistent,
+        load_standstill_rmse_n=still_rmse,
+        load_standstill_max_error_n=(
+            float(np.abs(still_error).max()) if still_error.size else math.nan
+        ),
+        load_standstill_coverage_2sigma=(
+            float(np.mean(np.abs(still_error) <= 2.0 * load_std[~moving]))
+            if still_error.size
+            else math.nan
+        ),
         jams=tuple(jams),
         false_jam_declarations=onsets,
         false_jam_seconds=float(durations[over].sum()),

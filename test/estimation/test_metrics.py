@@ -108,6 +108,25 @@ def test_overconfident_load_fails_the_nees_test_and_coverage_counts() -> None:
     assert covered.precision_loss_coverage_2sigma == 1.0
 
 
+def test_the_load_at_standstill_is_scored_apart() -> None:
+    """The standstill's error was in no metric (the RMSE, max and NEES are of motion)."""
+    stopped = truth(20.0, None)
+    stopped.screw_speed_rad_s[stopped.stamp_s >= 10.0] = 0.0
+    stamps = np.arange(0.02, 20.0, 0.04)
+    states = [
+        state(float(t), 20e3 + (3e3 if t >= 15.0 else 1e3 if t >= 10.0 else 0.0), 1e3, 0, 0.0)
+        for t in stamps
+    ]
+    metrics = score(states, stopped, rated_load_n=55e3, largest_screw_speed_rad_s=73.3)
+    assert metrics.load_rmse_n == pytest.approx(0.0, abs=1e-9)  # motion: exact
+    assert metrics.load_standstill_max_error_n == pytest.approx(3e3)
+    assert metrics.load_standstill_rmse_n == pytest.approx(np.sqrt((1e3**2 + 3e3**2) / 2), rel=0.01)
+    assert metrics.load_standstill_coverage_2sigma == pytest.approx(0.5, abs=0.01)  # 3 kN > 2 std
+    moving_only = score(states[:240], stopped, rated_load_n=55e3, largest_screw_speed_rad_s=73.3)
+    assert np.isnan(moving_only.load_standstill_rmse_n)
+    assert moving_only.to_dict()["load_standstill_coverage_2sigma"] is None
+
+
 def test_the_block_in_which_a_roller_seizes_may_report_it() -> None:
     """Stamps are block mid-points: the block stamped 9.98 holds samples up to 10.00, and the
     roller seizes at 9.99; reporting it there is an identification, not a false declaration."""
