@@ -238,7 +238,11 @@ def _axial_load(fields: Mapping[str, Any], th: DiagnosticThresholds, rated_n: fl
     load = float(fields["axial_load_n"])
     fraction = load / rated_n
     level = _level(fraction, th.load_warn_fraction, th.load_error_fraction)
-    message = f"{load / 1e3:.1f} kN ({100.0 * fraction:.0f} % of rated {rated_n / 1e3:.3g} kN)"
+    std = float(fields["axial_load_std_n"])  # over 10 kN at standstill: say it
+    message = (
+        f"{load / 1e3:.1f} ± {std / 1e3:.1f} kN (1 sigma), {100.0 * fraction:.0f} % of rated "
+        f"{rated_n / 1e3:.3g} kN"
+    )
     values = _picked(fields, "axial_load_n", "axial_load_std_n")
     values |= {"rated_load_n": rated_n, "load_fraction_of_rated": fraction}
     values |= _picked(fields, "friction_torque_nm", "efficiency", "screw_speed_rad_s")
