@@ -68,12 +68,16 @@ def screw_fingerprint(params: EstimatorParams) -> str:
 
 
 def actuator_fingerprint(params: EstimatorParams) -> str:
-    """A stable digest of what the filters' states depend on besides the screw: the drive
-    train, the misalignment and whether there are ripple states."""
-    actuator = params.actuator
+    """A stable digest of what the filters' states depend on: the screw, the drive train, the
+    misalignment and whether there are ripple states (the same digest as in the state files
+    saved before :func:`screw_fingerprint` existed, so that they still resume)."""
+    actuator, preset = params.actuator, params.actuator.preset
     return _digest(
         (
-            screw_fingerprint(params),
+            preset.geometry,
+            preset.friction,
+            preset.wear,
+            preset.fatigue,
             actuator.drive_train,
             actuator.misalignment,
             params.radial_terms,
@@ -180,7 +184,12 @@ class HealthEstimator:
             if snapshot["format"] != SNAPSHOT_FORMAT:
                 raise SnapshotError(f"format {snapshot['format']!r}, expected {SNAPSHOT_FORMAT}")
             whole = bool(snapshot["actuator"] == actuator_fingerprint(self.params))
-            if not whole and snapshot.get("screw") != screw_fingerprint(self.params):
+            if not whole and "screw" not in snapshot:  # saved before the screw's own digest
+                raise SnapshotError(
+                    "the state belongs to another actuator (the preset or the drive train "
+                    "differ; the state does not say which): refusing to resume from it"
+                )
+            if not whole and snapshot["screw"] != screw_fingerprint(self.params):
                 raise SnapshotError(
                     "the state belongs to another screw (the preset's geometry, materials, "
                     "friction, wear or fatigue differ): refusing to resume from it"

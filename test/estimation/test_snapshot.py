@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import dataclasses
+import hashlib
 import json
 import math
 
@@ -61,6 +62,21 @@ def test_a_state_of_another_screw_is_refused() -> None:
     # Said as it is (it read "malformed state: SnapshotError('the state belongs to ...')").
     with pytest.raises(SnapshotError, match=r"^the state belongs to another screw"):
         HealthEstimator(params("li2020-jamming")).restore(saved)
+
+
+def test_a_state_saved_before_the_screw_fingerprint_still_resumes() -> None:
+    """Files saved before 2026-11-26 have only the actuator's digest, of this tuple: it must
+    not change, or every such file would be set aside at the upgrade."""
+    base = params()
+    preset, actuator = base.actuator.preset, base.actuator
+    old = (preset.geometry, preset.friction, preset.wear, preset.fatigue)
+    old += (actuator.drive_train, actuator.misalignment, base.radial_terms)
+    saved = HealthEstimator(base).snapshot()
+    assert saved["actuator"] == hashlib.sha256(repr(old).encode()).hexdigest()[:16]
+    del saved["screw"]
+    assert HealthEstimator(base).restore(saved) is True
+    with pytest.raises(SnapshotError, match=r"^the state belongs to another actuator \(the pre"):
+        HealthEstimator(_changed(base, "drive train")).restore(saved)
 
 
 def _changed(base: EstimatorParams, change: str) -> EstimatorParams:
