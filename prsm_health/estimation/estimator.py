@@ -21,7 +21,7 @@ import numpy as np
 
 from prsm_health.estimation.degradation import Degradation, DegradationIntegrator
 from prsm_health.estimation.estimate import EstimateEvent, HealthState
-from prsm_health.estimation.hypotheses import DIVERGED_LOAD_RATIO, JamHypotheses, StepResult
+from prsm_health.estimation.hypotheses import JamHypotheses, StepResult
 from prsm_health.estimation.inputs import Block, InputCounters, SampleBlocker, merge_blocks
 from prsm_health.estimation.measurement import LOAD, TorqueModel
 from prsm_health.estimation.params import MIN_BLOCKS_FOR_DIVERGENCE, EstimatorParams
@@ -420,13 +420,14 @@ class HealthEstimator:
         return block.silence_before_s > HOLE_BLOCKS * self.params.filter.block_duration_s
 
     def _diverged(self, block: Block, step: StepResult) -> bool:
-        """Gated for too long, the likeliest load beyond DIVERGED_LOAD_RATIO of the rated
-        load, or the mean NIS of the likeliest hypothesis too large."""
+        """Gated for too long, the likeliest load beyond the divergence bound
+        (EstimatorParams.diverged_load_n), or the mean NIS of the likeliest hypothesis too
+        large."""
         self._gated_run = self._gated_run + 1 if step.gated else 0
         if self._gated_run >= GATED_BLOCKS_BEFORE_RESET:
             return True
         likeliest = self._bank.most_likely()
-        if abs(float(likeliest.filter.x[LOAD])) > DIVERGED_LOAD_RATIO * self.params.rated_load_n:
+        if abs(float(likeliest.filter.x[LOAD])) > self.params.diverged_load_n:
             return True
         if step.gated:
             return False

@@ -97,19 +97,13 @@ NEGLIGIBLE_LOG_PROBABILITY = math.log(1e-6)
 #: must not declare a jam.
 LONGEST_PREDICTION_S = 1.0
 
-#: An EKF update that moves the load by more than this share of the rated load is checked
+#: An EKF update that moves the load by more than this share of the load scale is checked
 #: for linearisation error, and iterated if the model misses the measurement at the updated
 #: state by more than ITERATION_SIGMAS of the measurement noise (JamHypotheses._ekf_update).
 LARGE_UPDATE_RATIO = 0.02
 ITERATION_SIGMAS = 3.0
 MAX_ITERATIONS = 3
 
-#: A load beyond this many times the rated load has diverged, whatever its NIS: the motor
-#: cannot drive it (at its current limit the default actuator's screw carries about five times
-#: its rated load). Seen with the UKF, whose spread can straddle F = 0, where a self-locked
-#: screw's friction slope changes sign. The estimator re-initialises the load there, and the
-#: re-initialisation restarts such a load from zero.
-DIVERGED_LOAD_RATIO = 10.0
 
 #: Smallest variance kept on each state, relative to its initial variance.
 VARIANCE_FLOOR_RATIO = 1e-12
@@ -245,12 +239,12 @@ class JamHypotheses:
         self.n_rollers = model.n_rollers
         self._rate_per_s = params.model.jam_rate_per_h / 3600.0
         self._prune = params.fidelity.prune_hypotheses
-        rated = params.rated_load_n
-        self._large_update_n = LARGE_UPDATE_RATIO * rated
+        scale = params.load_scale_n
+        self._large_update_n = LARGE_UPDATE_RATIO * scale
         initial = np.zeros(self._dim)
-        initial[LOAD] = rated**2
-        initial[LOAD_RATE] = rated**2  # the full load within a second
-        initial[LOAD_ACCELERATION] = (10.0 * rated) ** 2  # ... or within a third of a second
+        initial[LOAD] = scale**2
+        initial[LOAD_RATE] = scale**2  # the full load within a second
+        initial[LOAD_ACCELERATION] = (10.0 * scale) ** 2  # ... or within a third of a second
         self._ripple = model.ripple
         self._ekf = params.fidelity.filter != "ukf"
         if self._ripple:
@@ -562,7 +556,7 @@ class JamHypotheses:
         polar: PolarPhasor | None,
     ) -> None:
         """EKF update from the prior, iterated (Gauss-Newton, the iterated EKF) when it moved
-        the load by more than LARGE_UPDATE_RATIO of the rated load and the model misses the
+        the load by more than LARGE_UPDATE_RATIO of the load scale and the model misses the
         measurement at the updated state by more than ITERATION_SIGMAS of its noise.
 
         Such an update follows a re-acquisition (after a hole in the data the prior stays at
@@ -709,9 +703,10 @@ class JamHypotheses:
         """Forget the load's derivatives, and unless ``keep_load`` the load too (after a time
         reset or a divergence; after a hole in the data, where the load may have moved on).
         A forgotten load keeps its mean as the start of its re-acquisition, unless that lies
-        beyond DIVERGED_LOAD_RATIO of the rated load: then it starts from zero."""
+        beyond the divergence bound (EstimatorParams.diverged_load_n): then it starts from
+        zero."""
         forget = slice(LOAD_RATE if keep_load else LOAD, LOAD_STATES)
-        diverged = DIVERGED_LOAD_RATIO * self._params.rated_load_n
+        diverged = self._params.diverged_load_n
         for h in self.hypotheses:
             x, p = h.filter.x.copy(), h.filter.P.copy()
             if not keep_load and abs(float(x[LOAD])) > diverged:

@@ -49,13 +49,15 @@ LOAD_STATES = 3
 #: The ripple phasor (c, s) in the state.
 RIPPLE = slice(RIPPLE_COS, RIPPLE_SIN + 1)
 
-#: The ripple grows with the load up to this fraction of the rated load and stays at its size
-#: beyond: a jammed roller's ripple comes from the radial load (the borehole wall, 000) or the
-#: misalignment (004), which do not grow with the axial load, but the loaded flank can only
-#: carry a radial load below about the axial load (load_distribution.radial_capacity_ratio),
-#: so it vanishes with the axial load. scale = |F| L/2pi / sqrt(1 + (F / knee)^2).
+#: The ripple grows with the load up to this fraction of the load scale
+#: (EstimatorParams.load_scale_n) and stays at its size beyond: a jammed roller's ripple comes
+#: from the radial load (the borehole wall, 000) or the misalignment (004), which do not grow
+#: with the axial load, but the loaded flank can only carry a radial load below about the
+#: axial load (load_distribution.radial_capacity_ratio), so it vanishes with the axial load.
+#: scale = |F| L/2pi / sqrt(1 + (F / knee)^2).
 RIPPLE_KNEE_FRACTION = 0.2
-#: Below this fraction of the rated load the friction's slope takes the resisting side.
+#: Below this fraction of the load scale (EstimatorParams.load_scale_n) the friction's slope
+#: takes the resisting side.
 KINK_FRACTION = 1e-2
 
 
@@ -93,8 +95,8 @@ class TorqueModel:
         self._gear_ratio = drive.gear_ratio
         self._gear_loss = (1.0 - drive.gear_efficiency) / drive.gear_efficiency
         self._inertia = drive.inertia_at_motor_kg_m2
-        self._ripple_knee_n = RIPPLE_KNEE_FRACTION * params.rated_load_n
-        self._kink_n = KINK_FRACTION * params.rated_load_n
+        self._ripple_knee_n = RIPPLE_KNEE_FRACTION * params.load_scale_n
+        self._kink_n = KINK_FRACTION * params.load_scale_n
         self._wear_scale = actuator.wear_acceleration * params.model.wear_coefficient_factor
         self._actuator = actuator
         noise = params.noise

@@ -31,9 +31,15 @@ from prsm_health.yamlio import YamlError, load_yaml_mapping
 #: (``filter.divergence_window_s``).
 MIN_BLOCKS_FOR_DIVERGENCE = 10
 #: A rated load set in the diagnostics must lie within this factor of the preset's largest
-#: paper load either way (the filter's scales and its divergence bound follow it: 55 meant as
-#: kN instead of N would make every block "diverged").
+#: paper load either way (the statuses and the divergence bound follow it: 55 meant as kN
+#: instead of N would make every load an ERROR).
 RATED_LOAD_FACTOR = 10.0
+#: A load beyond this many times the load scale (or the rated load, if larger) has diverged,
+#: whatever its NIS: the motor cannot drive it (at its current limit the default actuator's
+#: screw carries about five times its largest paper load). Seen with the UKF, whose spread
+#: can straddle F = 0, where a self-locked screw's friction slope changes sign. The estimator
+#: re-initialises the load there, and the re-initialisation restarts such a load from zero.
+DIVERGED_LOAD_RATIO = 10.0
 
 
 def _require_ranges(obj: object, prefix: str, ranges: dict[str, tuple[float, float]]) -> None:
@@ -279,8 +285,9 @@ class Fidelity:
 class DiagnosticThresholds:
     """Levels of the diagnostics (OK / WARN / ERROR) and input health limits.
 
-    rated_load_n: 0 means the preset's largest paper load; else within RATED_LOAD_FACTOR of it
-    (the filter's scales follow it too). load_warn/error_fraction: of the
+    rated_load_n: 0 means the preset's largest paper load; else within RATED_LOAD_FACTOR of it.
+    Only the statuses and the divergence bound follow it (EstimatorParams.diverged_load_n), not
+    the filter's model. load_warn/error_fraction: of the
     rated load. jam_warn_probability: P(at least one jammed roller) that raises WARN; a most
     likely count >= 1 is ERROR. precision_loss_budget_um: the allowed loss; warn/error
     fractions of it. fatigue_warn/error_damage: Miner damage levels. stale_timeout_s: inputs
@@ -363,6 +370,21 @@ class EstimatorParams:
         """The load the diagnostics compare against (the preset's largest by default)."""
         rated = self.diagnostics.rated_load_n
         return rated if rated > 0.0 else self.actuator.preset.largest_axial_load_n
+
+    @property
+    def load_scale_n(self) -> float:
+        """The filter's load scale: the preset's largest paper load (initial variances, the
+        ripple's knee, the friction's kink, the size of an update that is checked). A
+        property of the screw, not of the diagnostics: setting ``rated_load_n`` as an alarm
+        level must not change the estimates."""
+        return self.actuator.preset.largest_axial_load_n
+
+    @property
+    def diverged_load_n(self) -> float:
+        """A likeliest load beyond this has diverged (DIVERGED_LOAD_RATIO of the larger of the
+        load scale and the rated load: an actuator rated above its preset's paper loads may
+        carry such loads)."""
+        return DIVERGED_LOAD_RATIO * max(self.load_scale_n, self.rated_load_n)
 
     @property
     def max_motor_speed_rad_s(self) -> float:

@@ -247,6 +247,24 @@ def test_a_load_beyond_what_the_motor_can_drive_is_a_divergence() -> None:
     assert all(abs(s.axial_load_n) < 10.0 * estimator.params.rated_load_n for s in states)
 
 
+@pytest.mark.parametrize("rated_load_n", [30e3, 200e3])
+def test_the_rated_load_of_the_diagnostics_does_not_change_the_estimates(
+    rated_load_n: float,
+) -> None:
+    """It scaled the filter: set to 30 kN as an alarm level, the load RMSE of a run went from
+    177 N to 303 N. Above the preset's largest load it raises only the divergence bound."""
+    scene = scene_from_mapping(downhole(duration_s=8.0, jams=[{"time_s": 4.0, "roller": 2}]))
+    samples = simulate(scene).motor
+    default = EstimatorParams(actuator=scene.actuator)
+    rated = dataclasses.replace(
+        default, diagnostics=dataclasses.replace(default.diagnostics, rated_load_n=rated_load_n)
+    )
+    assert rated.rated_load_n == rated_load_n != default.rated_load_n
+    assert rated.diverged_load_n == 10.0 * max(rated_load_n, default.rated_load_n)
+    estimates = [HealthEstimator(p).process(samples) for p in (default, rated)]
+    assert len(estimates[0]) > 100 and estimates[0] == estimates[1]
+
+
 def test_a_clock_reset_starts_one_load_transition_not_one_per_block() -> None:
     """After the clock jumps back, the load model's stroke-start transition lasts its
     ``model.load_transition_s`` on the new time line, as after a direction change."""
