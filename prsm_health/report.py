@@ -10,7 +10,7 @@ three plots and the metrics). The truth is drawn wide, dashed and pale under the
 line, so that both show where they coincide. Sensor time resets and divergence recoveries are
 marked by vertical lines on every plot. After a sensor time reset the estimates are
 drawn on the truth's clock, shifted by the offsets the metrics found (the x label says by how
-much). matplotlib's Agg backend: no display needed.
+much), also after a clock that jumped ahead. matplotlib's Agg backend: no display needed.
 """
 
 from __future__ import annotations
@@ -62,8 +62,8 @@ class _Series:
 
 
 def _series(states: list[HealthState], clock_offsets_s: tuple[float, ...] | None) -> _Series:
-    """The estimates to plot. With ``clock_offsets_s`` (the metrics', one per sensor time
-    reset) on the truth's clock, shifted after each reset as the scoring did; without, on the
+    """The estimates to plot. With ``clock_offsets_s`` (the metrics', one per sensor clock
+    jump or skip) on the truth's clock, shifted as the scoring did; without, on the
     sensor's."""
     stamps = np.array([s.stamp_s for s in states])
     return _Series(
@@ -187,9 +187,11 @@ def write_report(
     series = _series(states, offsets)
     t = series.stamp_s
     xlabel = "time [s]"
-    if offsets:
-        shifts = ", ".join(f"{offset:+.3f} s" for offset in offsets)
-        xlabel += f" (estimates after a sensor time reset shifted by {shifts}, as scored)"
+    found = offsets or ()
+    changes = [b for a, b in zip((0.0, *found), found, strict=False) if b != a]
+    if changes:  # a gap in the data keeps the offset before it: not named
+        shifts = ", ".join(f"{offset:+.3f} s" for offset in changes)
+        xlabel += f" (estimates after a sensor clock jump shifted by {shifts}, as scored)"
     figures = []
 
     figures.append(_load_figure(series, truth, xlabel=xlabel, title=title))

@@ -28,10 +28,12 @@ Definitions:
 - precision loss: the final error (absolute and relative to the final truth), and the
   fraction of estimates whose truth lies within +-2 std.
 
-Estimates are stamped with the sensor's clock. When that clock jumps (an estimate with event
-TIME_RESET), the estimates after it are put back on the truth's time line by the offset that
-best matches their screw speed to the truth's (searched within +-MAX_CLOCK_OFFSET_S); the
-offsets found are reported.
+Estimates are stamped with the sensor's clock. When that clock jumps back (an estimate with
+event TIME_RESET) or its stamps skip ahead (estimates further apart than SKIP_S: a clock that
+jumped ahead, or missing data), the estimates after it are put back on the truth's
+time line by the offset that best matches their screw speed to the truth's (searched within
++-MAX_CLOCK_OFFSET_S; after a skip the offset before it is kept unless another matches
+clearly better); the offsets found are reported, one per jump or skip.
 """
 
 from __future__ import annotations
@@ -53,8 +55,18 @@ FloatArray = NDArray[np.float64]
 MOVING_FRACTION = 0.01
 #: The NEES test covers loads from this fraction of the rated load up.
 NEES_MIN_LOAD_FRACTION = 0.05
-#: Largest sensor-clock jump that the alignment after a TIME_RESET searches for [s].
+#: Largest sensor-clock jump that the alignment after a TIME_RESET or a skip searches for [s].
 MAX_CLOCK_OFFSET_S = 10.0
+#: Consecutive estimates in motion further apart than this [s] (a few blocks) are a skip: the
+#: sensor clock jumped ahead, or data are missing. Shorter skips are not searched, and
+#: misalign the estimates after them by at most this.
+SKIP_S = 0.1
+#: The same when either estimate is a standstill one (merged blocks of up to
+#: ``fidelity.standstill_block_s``, 0.5 s by default, apart).
+SKIP_STANDSTILL_S = 1.0
+#: After a skip, another offset than the one before it (at least SKIP_S / 2 from it) must
+#: match the screw speed this many times better (mean squared difference) to be taken.
+SKIP_MATCH_GAIN = 2.0
 
 
 @dataclass(frozen=True)
@@ -178,42 +190,64 @@ def score(
 
 
 def _clock_offsets(states: list[HealthState], truth: TruthSamples) -> tuple[float, ...]:
-    """The offset of each time line after a TIME_RESET that best matches its estimates'
-    screw speed to the truth's (searched within +-MAX_CLOCK_OFFSET_S)."""
+    """The offset of each time line (:func:`_time_lines`) that best matches its estimates'
+    screw speed to the truth's: after a TIME_RESET searched within +-MAX_CLOCK_OFFSET_S of
+    zero; after a skip, around the offset of the line before it, which is kept unless one at
+    least SKIP_S / 2 from it matches the speed SKIP_MATCH_GAIN times better (a gap in the
+    data, or a standstill where every offset matches alike, keeps it)."""
     stamps = np.array([s.stamp_s for s in states])
     speed = np.array([s.screw_speed_rad_s for s in states])
-    offsets = []
-    for segment in _after_time_resets(states):
-        best = 0.0
+
+    def mismatch(segment: slice, candidates: FloatArray) -> FloatArray:
+        shifted = stamps[segment][None, :] + candidates[:, None]
+        truth_speed = np.interp(shifted, truth.stamp_s, truth.screw_speed_rad_s)
+        return np.asarray(np.mean((truth_speed - speed[segment][None, :]) ** 2, axis=1))
+
+    offsets: list[float] = []
+    for segment in _time_lines(states):
+        reset = states[segment.start].event == EstimateEvent.TIME_RESET
+        before = 0.0 if reset or not offsets else offsets[-1]
+        best = before
         for step in (1e-2, 1e-3):
             span = MAX_CLOCK_OFFSET_S if step == 1e-2 else 2e-2
-            candidates = best + np.arange(-span, span + step / 2, step)
-            shifted = stamps[segment][None, :] + candidates[:, None]
-            truth_speed = np.interp(shifted, truth.stamp_s, truth.screw_speed_rad_s)
-            errors = np.mean((truth_speed - speed[segment][None, :]) ** 2, axis=1)
-            best = float(candidates[int(np.argmin(errors))])
+            offsets_near = np.arange(-span, span + step / 2, step)
+            candidates = best + offsets_near[np.argsort(np.abs(offsets_near), kind="stable")]
+            best = float(candidates[int(np.argmin(mismatch(segment, candidates)))])  # ties: nearest
+        if not reset:
+            kept, found = mismatch(segment, np.array([before, best]))
+            jumped = abs(best - before) >= SKIP_S / 2 and found * SKIP_MATCH_GAIN < kept
+            best = best if jumped else before
         offsets.append(best)
     return tuple(offsets)
 
 
 def on_truth_clock(states: list[HealthState], offsets_s: tuple[float, ...]) -> FloatArray:
-    """The stamps of ``states`` with ``offsets_s[i]`` added from their i-th TIME_RESET on: the
-    time line :func:`score` compares on (``Metrics.clock_offsets_s``)."""
+    """The stamps of ``states`` with ``offsets_s[i]`` added over their i-th time line after
+    the first (:func:`_time_lines`): the time line :func:`score` compares on
+    (``Metrics.clock_offsets_s``)."""
     stamps = np.array([s.stamp_s for s in states])
-    segments = _after_time_resets(states)
+    segments = _time_lines(states)
     if len(offsets_s) != len(segments):
         raise ValueError(
-            f"on_truth_clock: {len(offsets_s)} offsets for {len(segments)} time resets"
+            f"on_truth_clock: {len(offsets_s)} offsets for {len(segments)} sensor clock jumps"
         )
     for segment, offset in zip(segments, offsets_s, strict=True):
         stamps[segment] += offset
     return stamps
 
 
-def _after_time_resets(states: list[HealthState]) -> list[slice]:
-    """The estimates from each TIME_RESET to the next (or the end)."""
-    resets = [i for i, s in enumerate(states) if s.event == EstimateEvent.TIME_RESET]
-    return [slice(b, e) for b, e in zip(resets, [*resets[1:], len(states)], strict=False)]
+def _time_lines(states: list[HealthState]) -> list[slice]:
+    """The estimates from each sensor clock jump to the next (or the end): a TIME_RESET, or a
+    skip, where the stamps advance by more than SKIP_S from one estimate in motion to the next
+    (SKIP_STANDSTILL_S if either is a standstill estimate, which may stand for merged blocks):
+    a clock that jumped ahead, or a gap in the data (:func:`_clock_offsets` tells them apart).
+    The estimates before the first keep their stamps."""
+    stamps = np.array([s.stamp_s for s in states])
+    still = np.array([s.event == EstimateEvent.STANDSTILL for s in states], dtype=bool)
+    longest = np.where(still[1:] | still[:-1], SKIP_STANDSTILL_S, SKIP_S)
+    skipped = np.r_[False, np.diff(stamps) > longest]
+    starts = [i for i, s in enumerate(states) if s.event == EstimateEvent.TIME_RESET or skipped[i]]
+    return [slice(b, e) for b, e in zip(starts, [*starts[1:], len(states)], strict=False)]
 
 
 def _nees_test(stamps: FloatArray, nees: FloatArray) -> tuple[float, tuple[float, float], bool]:

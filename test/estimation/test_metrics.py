@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import dataclasses
+from typing import Any
 
 import numpy as np
 import pytest
@@ -147,10 +148,55 @@ def test_the_block_in_which_a_roller_seizes_may_report_it() -> None:
 def test_on_truth_clock_shifts_each_time_line_by_its_own_offset() -> None:
     """Each offset applies from its TIME_RESET to the next; the estimates before the first
     reset keep their stamps; offsets that do not match the resets are refused by name."""
-    states = [state(float(t), 20e3, 100.0, 0, 0.0) for t in (1.0, 2.0, 3.0, 1.5, 2.5, 9.0)]
+    stamps = (1.0, 1.04, 1.08, 0.5, 0.54, 0.1)
+    states = [state(t, 20e3, 100.0, 0, 0.0) for t in stamps]
     states[3] = dataclasses.replace(states[3], event=EstimateEvent.TIME_RESET)
     states[5] = dataclasses.replace(states[5], event=EstimateEvent.TIME_RESET)
     shifted = on_truth_clock(states, (2.0, -5.0))
-    np.testing.assert_allclose(shifted, [1.0, 2.0, 3.0, 3.5, 4.5, 4.0])
-    with pytest.raises(ValueError, match="1 offsets for 2 time resets"):
+    np.testing.assert_allclose(shifted, [1.0, 1.04, 1.08, 2.5, 2.54, -4.9])
+    with pytest.raises(ValueError, match="1 offsets for 2 sensor clock jumps"):
         on_truth_clock(states, (2.0,))
+
+
+def _swaying(seconds: float) -> TruthSamples:
+    """A truth whose screw speed changes all the time and never repeats (a chirp), so that a
+    time offset shows and only the right one matches."""
+    run = truth(seconds, None)
+    t = run.stamp_s
+    run.screw_speed_rad_s[:] = 30.0 * np.sin(2.0 * np.pi * (0.1 * t + 0.01 * t**2)) + 5.0
+    run.axial_load_n[:] = 20e3 + 10e3 * np.sin(2.0 * np.pi * run.stamp_s / 3.0)
+    return run
+
+
+@pytest.mark.parametrize(
+    ("clock", "offsets"),
+    [
+        # jumps ahead by 3 s at 10 s: scored 3 s late, the load RMSE was 11 % of rated
+        (lambda t: t + 3.0 * (t >= 10.0), (-3.0,)),
+        # no samples from 10 to 11 s: a gap, the clock unchanged
+        (lambda t: np.where((t >= 10.0) & (t < 11.0), np.nan, t), (0.0,)),
+        # ahead by 3 s at 10 s, then back by 10 s at 20 s (a TIME_RESET)
+        (lambda t: t + 3.0 * (t >= 10.0) - 10.0 * (t >= 20.0), (-3.0, 7.0)),
+    ],
+)
+def test_a_clock_that_jumps_ahead_is_put_back_on_the_truths_time_line(
+    clock: Any, offsets: tuple[float, ...]
+) -> None:
+    run = _swaying(30.0)
+    times = np.arange(0.02, 30.0, 0.04)
+    stamps = clock(times)
+    states = []
+    for t, stamp in zip(times, stamps, strict=True):
+        if np.isnan(stamp):
+            continue
+        load = float(np.interp(t, run.stamp_s, run.axial_load_n))
+        speed = float(np.interp(t, run.stamp_s, run.screw_speed_rad_s))
+        event = EstimateEvent.TIME_RESET if states and stamp < states[-1].stamp_s else 0
+        states.append(
+            dataclasses.replace(
+                state(float(stamp), load, 100.0, 0, 0.0), screw_speed_rad_s=speed, event=event
+            )
+        )
+    metrics = score(states, run, rated_load_n=55e3, largest_screw_speed_rad_s=73.3)
+    assert metrics.clock_offsets_s == pytest.approx(offsets, abs=1e-3)
+    assert metrics.load_rmse_n < 1.0  # every estimate compared at its own time
