@@ -6,6 +6,7 @@ Subcommands:
   play, monitor, demo   the ROS tools (prsm_health/ros/tools.py)
   simulate    run a scene of the truth simulator into a rosbag2 MCAP bag
   replay      run the estimator over a bag: summary, --out MCAP, --report, --metrics-json
+  node-params the node's params file for a simulated bag (its actuator, e.g. its wear)
   bench       the estimator benchmark: run time against error, floors (docs/performance.md)
 Units at this edge are the engineers' ones (N, rpm, arcmin, mm, um/h); inside all is SI.
 """
@@ -27,6 +28,7 @@ from tqdm import tqdm
 
 from prsm_health.bench_command import add_bench_command
 from prsm_health.interrupt import EXIT_INTERRUPTED, stop_on_interrupt
+from prsm_health.node_params import add_node_params_command
 from prsm_health.physics.errors import PhysicsError
 from prsm_health.physics.geometry import Misalignment
 from prsm_health.physics.load_distribution import LoadingCase
@@ -151,6 +153,7 @@ def _build_parser() -> _Parser:
     model_demo.set_defaults(handler=_run_model_demo)
     add_ros_commands(commands)
     add_replay_command(commands)
+    add_node_params_command(commands)
     add_bench_command(commands)
     return parser
 

@@ -14,6 +14,7 @@ from pathlib import Path
 from typing import TypeVar
 
 from prsm_health.interrupt import EXIT_INTERRUPTED
+from prsm_health.node_params import accelerated_wear_note
 
 Parser = TypeVar("Parser", bound=argparse.ArgumentParser)
 #: The scene bag ``make demo`` plays (made by ``prsm-health simulate``, see bags/).
@@ -147,6 +148,9 @@ def _run_play(args: argparse.Namespace) -> int:
     )
     if args.clock_rate is not None and not args.clock:
         raise PlayInputError("--clock-rate sets the rate of --clock's /clock: give --clock too")
+    note = accelerated_wear_note(args.bag)
+    if note is not None:
+        print(note, file=sys.stderr)
     try:
         with ros_session() as stop, open_bag(args.bag, options.topics) as source:
             report = play(source, options, stop, _warn_play)

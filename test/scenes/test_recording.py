@@ -12,6 +12,8 @@ import yaml
 
 from prsm_health.bags.bagfiles import custom_data
 from prsm_health.cli import main
+from prsm_health.estimation.params import bundled_params_file, load_params
+from prsm_health.node_params import accelerated_wear_note
 from prsm_health.physics.errors import ParameterError
 from prsm_health.ros.demo import DemoError, bag_duration_s, demo_params
 from prsm_health.scenes.recording import ACTUATOR_KEY, SCENE_KEY, bag_actuator, bundled_scene_of
@@ -182,3 +184,38 @@ def test_a_bag_named_after_a_bundled_scene_is_found_by_its_name(
     monkeypatch.chdir(directory)
     assert bundled_scene_of(Path(".")) == "sudden-jam"
     assert bundled_scene_of(BUNDLED_BAGS) is None
+
+
+def test_node_params_writes_the_bundled_parameters_with_the_bags_actuator(
+    renamed: Path, tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    """Fed from a scene bag as the README said, with the bundled parameters, a node reported a
+    precision loss 1e5 times too small (the scene's wear acceleration)."""
+    out = tmp_path / "node.yaml"
+    assert main(["node-params", str(renamed), "--out", str(out)]) == 0
+    assert f"-p params_file:={out}" in capsys.readouterr().out
+    written = yaml.safe_load(out.read_text())
+    bundled = yaml.safe_load(bundled_params_file().read_text())
+    section = {"preset": "dong2022-downhole", "wear_acceleration": 1.0e5}
+    assert written == {**bundled, "actuator": section}
+    assert load_params(out).actuator == load_scene("sudden-jam").actuator
+    assert main(["node-params", str(renamed), "--out", str(out)]) == 2  # not overwritten
+    assert capsys.readouterr().err == f"prsm-health: error: --out: {out} exists\n"
+
+
+def test_a_bag_without_a_record_gets_no_node_params_and_no_play_note(
+    renamed: Path, tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    note = accelerated_wear_note(renamed)
+    assert note is not None and "accelerates wear x100000" in note
+    assert f"prsm-health node-params {renamed} --out FILE" in note
+    unrecorded = tmp_path / "field-run"
+    shutil.copytree(renamed, unrecorded)
+    meta = unrecorded / "metadata.yaml"
+    info = yaml.safe_load(meta.read_text())
+    del info["rosbag2_bagfile_information"]["custom_data"]
+    meta.write_text(yaml.safe_dump(info))
+    assert accelerated_wear_note(unrecorded) is None
+    out = tmp_path / "node.yaml"
+    assert main(["node-params", str(unrecorded), "--out", str(out)]) == 2
+    assert "records no actuator" in capsys.readouterr().err and not out.exists()

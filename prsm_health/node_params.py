@@ -1,0 +1,96 @@
+"""The node's parameters file for a simulated bag: ``prsm-health node-params BAG --out FILE``.
+
+A scene bag records the actuator it was simulated with (scenes/recording.py), and the scenes
+accelerate wear (``wear_acceleration``, 1e5 in the bundled ones). A node fed from such a bag
+with the bundled parameters estimates the right load and jams but a precision loss that many
+times too small. This writes the estimator parameters (the bundled ``config/default.yaml``,
+or ``--params FILE``) with the bag's ``actuator:`` section instead of theirs, for the node's
+``params_file`` (what ``prsm-health demo`` does for itself).
+"""
+
+from __future__ import annotations
+
+import argparse
+from pathlib import Path
+from typing import Any
+
+import yaml
+
+from prsm_health.estimation.params import bundled_params_file, load_params_mapping
+from prsm_health.scenes.recording import SceneActuator, bag_actuator, usable_bag_actuator
+from prsm_health.yamlio import YamlError
+
+
+def params_for_bag(bag: Path, base: Path) -> tuple[dict[str, Any], SceneActuator] | None:
+    """The parameters of ``base`` with the actuator ``bag`` was simulated with, and that
+    actuator; None if the bag records none (then ``base`` holds as it is).
+
+    Raises:
+        BagError: the bag cannot be opened.
+        YamlError: ``base`` cannot be read.
+    """
+    scene = usable_bag_actuator(bag, base)
+    if scene is None:
+        return None
+    params = load_params_mapping(base)
+    params["actuator"] = scene.section
+    return params, scene
+
+
+def accelerated_wear_note(bag: Path) -> str | None:
+    """What ``prsm-health play`` says before playing a bag whose recorded scene accelerates
+    wear (None for any other bag, also one whose record cannot be read)."""
+    try:
+        scene = bag_actuator(bag)
+    except ValueError:  # BagError, ParameterError: play says what it can
+        return None
+    if scene is None or scene.actuator.wear_acceleration == 1.0:
+        return None
+    return (
+        f"note: the scene of {bag} accelerates wear x{scene.actuator.wear_acceleration:g}; a "
+        f"node's precision loss follows it only with the bag's actuator: prsm-health "
+        f"node-params {bag} --out FILE, then -p params_file:=FILE"
+    )
+
+
+def add_node_params_command(commands: Any) -> None:
+    """Register ``node-params`` on the ``prsm-health`` subparsers."""
+    parser = commands.add_parser(
+        "node-params", help="write the node's params file for a simulated bag (its actuator)"
+    )
+    parser.add_argument("bag", type=Path, help="a bag made by prsm-health simulate")
+    parser.add_argument("--out", required=True, type=Path, metavar="FILE", help="YAML to write")
+    parser.add_argument(
+        "--params",
+        type=Path,
+        metavar="YAML",
+        help="the estimator parameters to start from (default: the bundled config/default.yaml)",
+    )
+    parser.set_defaults(handler=_run_node_params)
+
+
+def _run_node_params(args: argparse.Namespace) -> int:
+    """Write the file; a problem is a ValueError (one line, exit 2, from cli.main)."""
+    base = args.params or bundled_params_file()
+    if args.out.exists():
+        raise ValueError(f"--out: {args.out} exists")
+    try:
+        found = params_for_bag(args.bag, base)
+    except YamlError as exc:
+        raise ValueError(f"--params: {exc}") from exc
+    if found is None:
+        raise ValueError(
+            f"{args.bag} records no actuator (not made by prsm-health simulate, nor named "
+            f"after a bundled scene): the node's params_file is {base} or one of yours"
+        )
+    params, scene = found
+    try:
+        args.out.write_text(yaml.safe_dump(params, sort_keys=False), encoding="utf-8")
+    except OSError as exc:
+        raise ValueError(f"--out: {exc}") from exc
+    print(
+        f"wrote {args.out}: {base} with the actuator of {scene.origin} (wear x "
+        f"{scene.actuator.wear_acceleration:g}); start the node with "
+        f"--ros-args -p params_file:={args.out.resolve()}"
+    )
+    return 0
