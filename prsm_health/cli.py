@@ -27,7 +27,7 @@ from typing import Any, NoReturn
 from tqdm import tqdm
 
 from prsm_health.bench_command import add_bench_command
-from prsm_health.interrupt import EXIT_INTERRUPTED, stop_on_interrupt
+from prsm_health.interrupt import EXIT_INTERRUPTED, removed_on_abort, stop_on_interrupt
 from prsm_health.node_params import add_node_params_command
 from prsm_health.physics.errors import PhysicsError
 from prsm_health.physics.geometry import Misalignment
@@ -293,6 +293,7 @@ def _run_simulate(args: argparse.Namespace) -> int:
     simulator = Simulator(scene, exact=True if args.exact else None)
     with (
         stop_on_interrupt() as stop,
+        removed_on_abort(args.out),
         tqdm(total=scene.samples, unit="sample", unit_scale=True, disable=None) as bar,
     ):
         motor, truth = record(simulator, args.out, progress=bar.update, stop=stop)
@@ -312,6 +313,9 @@ def main(argv: Sequence[str] | None = None) -> int:
     except (PhysicsError, ValueError) as exc:
         print(f"prsm-health: error: {exc}", file=sys.stderr)
         return EXIT_USAGE
+    except KeyboardInterrupt:  # a second Ctrl-C (the first asks to stop: interrupt.py)
+        print("prsm-health: aborted by Ctrl-C", file=sys.stderr)
+        return EXIT_INTERRUPTED
     except BrokenPipeError:  # the reader left (``| head``): stop quietly, as cat does
         os.dup2(os.open(os.devnull, os.O_WRONLY), sys.stdout.fileno())
         return EXIT_BROKEN_PIPE

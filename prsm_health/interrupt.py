@@ -3,17 +3,21 @@
 ``simulate`` closes a complete, shorter bag and ``replay`` reports what it read: both end
 their loop when :func:`stop_on_interrupt`'s event is set instead of being torn down by
 KeyboardInterrupt in the middle of a write (a second Ctrl-C does tear them down, for a user
-who will not wait), and exit with :data:`EXIT_INTERRUPTED`, as do
+who will not wait: :func:`removed_on_abort` then removes the output they were writing, and
+``prsm-health`` says so in one line), and exit with :data:`EXIT_INTERRUPTED`, as do
 ``play`` and ``monitor`` (whose ROS session turns SIGINT and SIGTERM into its stop event:
 :func:`prsm_health.ros.runtime.ros_session`).
 """
 
 from __future__ import annotations
 
+import shutil
 import signal
+import sys
 import threading
 from collections.abc import Iterator
 from contextlib import contextmanager
+from pathlib import Path
 from types import FrameType
 
 #: Exit code of a command stopped by Ctrl-C (128 + SIGINT, as a shell reports it).
@@ -36,3 +40,20 @@ def stop_on_interrupt() -> Iterator[threading.Event]:
         yield stop
     finally:
         signal.signal(signal.SIGINT, previous)
+
+
+@contextmanager
+def removed_on_abort(output: Path | None) -> Iterator[None]:
+    """Remove ``output`` (a bag this run is writing, which did not exist before it) when a
+    second Ctrl-C tears the run down, and let the KeyboardInterrupt go on: the bag would be
+    incomplete (no metadata.yaml, a cut MCAP), look like a result, and block the rerun."""
+    try:
+        yield
+    except KeyboardInterrupt:
+        if output is not None and output.is_dir() and not output.is_symlink():
+            shutil.rmtree(output, ignore_errors=True)
+        elif output is not None:
+            output.unlink(missing_ok=True)
+        if output is not None:
+            print(f"removed the incomplete {output}", file=sys.stderr)
+        raise

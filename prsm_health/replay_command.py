@@ -34,7 +34,7 @@ from prsm_health.estimation.params import (
     load_params_mapping,
     params_from_mapping,
 )
-from prsm_health.interrupt import EXIT_INTERRUPTED, stop_on_interrupt
+from prsm_health.interrupt import EXIT_INTERRUPTED, removed_on_abort, stop_on_interrupt
 from prsm_health.outputs import DEFAULT_HARDWARE_ID
 from prsm_health.replay import ReplayResult, replay
 from prsm_health.scenes.recording import SceneActuator, scene_actuator, usable_bag_actuator
@@ -177,6 +177,7 @@ def run_replay(args: argparse.Namespace) -> int:
     with (
         tqdm(unit="sample", unit_scale=True, disable=None, file=sys.stderr) as bar,
         stop_on_interrupt() as stop,
+        removed_on_abort(args.out),
     ):
         result = replay(
             args.bag,

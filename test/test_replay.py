@@ -8,6 +8,7 @@ import math
 import os
 import shutil
 import signal
+import time
 from collections.abc import Callable
 from pathlib import Path
 from typing import Any
@@ -220,6 +221,35 @@ def test_ctrl_c_ends_the_replay_with_what_was_read(
     assert scores["partial"] == "stopped by Ctrl-C after 20000 samples"
     assert "(stopped by Ctrl-C after 20000 samples)" in (report / "index.html").read_text()
     assert signal.getsignal(signal.SIGINT) is signal.default_int_handler
+
+
+def test_a_second_ctrl_c_aborts_and_removes_the_incomplete_output(
+    tmp_path: Path, capsys: pytest.CaptureFixture[str], monkeypatch: pytest.MonkeyPatch
+) -> None:
+    """Two SIGINTs while the first chunk is written: it was a traceback and an output bag
+    without metadata.yaml that made the rerun fail ("--out: ... exists")."""
+    real = replay_command.replay
+
+    def aborted(*args: Any, progress: Callable[[int], None], **kwargs: Any) -> ReplayResult:
+        def then_ctrl_c_twice(samples: int) -> None:
+            progress(samples)
+            os.kill(os.getpid(), signal.SIGINT)
+            os.kill(os.getpid(), signal.SIGINT)
+            time.sleep(0.05)  # the second one raises at the next bytecode
+
+        return real(*args, progress=then_ctrl_c_twice, **kwargs)
+
+    monkeypatch.setattr(replay_command, "replay", aborted)
+    out = tmp_path / "out"
+    argv = ["replay", str(BUNDLED_BAGS / "sudden-jam"), "--out", str(out)]
+    assert main(argv) == 130
+    assert capsys.readouterr().err.splitlines()[-2:] == [
+        f"removed the incomplete {out}",
+        "prsm-health: aborted by Ctrl-C",
+    ]
+    assert not out.exists()
+    monkeypatch.setattr(replay_command, "replay", real)
+    assert main(argv) == 0 and (out / "metadata.yaml").is_file()  # the rerun
 
 
 def test_cli_refuses_a_missing_bag_and_bad_params_in_one_line(
