@@ -37,7 +37,12 @@ from prsm_health.estimation.params import (
 from prsm_health.interrupt import EXIT_INTERRUPTED, removed_on_abort, stop_on_interrupt
 from prsm_health.outputs import DEFAULT_HARDWARE_ID
 from prsm_health.replay import ReplayResult, replay
-from prsm_health.scenes.recording import SceneActuator, scene_actuator, usable_bag_actuator
+from prsm_health.scenes.recording import (
+    SceneActuator,
+    records_actuator,
+    scene_actuator,
+    usable_bag_actuator,
+)
 from prsm_health.yamlio import YamlError
 
 
@@ -196,7 +201,8 @@ def run_replay(args: argparse.Namespace) -> int:
             print(f"  {why}")
             return 1
         raise ValueError(why)
-    if scene is None and result.truth is not None:  # simulated, yet no record of its scene
+    simulated = result.truth is not None and len(result.truth) > 0
+    if scene is None and simulated and not records_actuator(args.bag):
         print(
             f"  note: {args.bag} has a ground truth but no record of its scene's actuator (a"
             " bag cut short loses it): --scene NAME|FILE gives the estimator the scene's"

@@ -136,6 +136,15 @@ def bag_actuator(bag: Path) -> SceneActuator | None:
     return SceneActuator(section, actuator, origin)
 
 
+def records_actuator(bag: Path) -> bool:
+    """Whether ``bag`` holds the record of its scene's actuator (usable or not; False also
+    for a bag whose metadata cannot be read, e.g. an ``.mcap`` cut short)."""
+    try:
+        return ACTUATOR_KEY in custom_data(bag)
+    except ValueError:  # BagError: damaged
+        return False
+
+
 def usable_bag_actuator(bag: Path, instead: Path) -> SceneActuator | None:
     """:func:`bag_actuator`, or None with a warning on stderr when the bag's record cannot
     build an actuator (a preset file no longer where it was): the caller then uses the

@@ -146,6 +146,7 @@ def test_replay_warns_and_goes_on_when_the_record_cannot_be_used(
     assert f"warning: {bag}: custom_data {ACTUATOR_KEY}: preset: " in captured.err
     assert "default.yaml is used" in captured.err
     assert "actuator of" not in captured.out
+    assert "no record" not in captured.out  # it has one (the note contradicted the warning)
 
 
 def test_replays_output_bag_keeps_the_record(renamed: Path, tmp_path: Path) -> None:
