@@ -149,7 +149,9 @@ def summary(
     diagnostics: dict[str, Any] | None,
     truth: TruthPoint | None = None,
 ) -> str:
-    """The closing summary of the last estimate, the truth at its time, and the diagnostics."""
+    """The closing summary of the last estimate, the truth at its time, and the diagnostics
+    (with the time of the estimate they report: the last ones before the node went silent,
+    which may be an estimate or two before the last)."""
     if health is None:
         return "summary: no estimate was received"
     probabilities = health["jammed_rollers_probability"]
@@ -170,7 +172,13 @@ def summary(
             f"  truth           {truth.axial_load_n / 1e3:.2f} kN, {truth.jammed_rollers} jammed,"
             f" {truth.precision_loss_um:.4g} um lost"
         )
-    for status in diagnostics["status"] if diagnostics else []:
+    statuses = diagnostics["status"] if diagnostics else []
+    stamps = {
+        s["values"]["estimate_stamp_s"] for s in statuses if "estimate_stamp_s" in s["values"]
+    }
+    if stamps:  # the last diagnostics before the bag's end: an earlier estimate, said
+        lines.append(f"diagnostics of the estimate at bag time {', '.join(sorted(stamps))} s:")
+    for status in statuses:
         lines.append(f"  {status['level']:<5} {status['name']}: {status['message']}")
     return "\n".join(lines)
 

@@ -85,7 +85,12 @@ def add_ros_commands(commands: argparse._SubParsersAction[Parser]) -> None:
     monitor.add_argument("--node", default="/prsm_health", help="node name (default /prsm_health)")
     monitor.add_argument("--json", action="store_true", help="one JSON object per message")
     monitor.add_argument(
-        "--count", type=_count, default=0, metavar="N", help="stop after N records (0: no limit)"
+        "--count",
+        type=_count,
+        default=0,
+        metavar="N",
+        help="stop after N records printed: tables, or with --json objects of either topic "
+        "(0: no limit)",
     )
     monitor.add_argument(
         "--timeout",

@@ -655,5 +655,7 @@ def test_demo_runs_node_player_and_monitor(tmp_path: Path) -> None:
     received = re.search(r"input health: .*, 0 rejected of (\d+) received", summary)
     assert accepted and received and received[1] == accepted[1], summary
     assert "STALE" not in summary
+    # Which estimate the statuses report (they showed another load than the line above).
+    assert re.search(r"\ndiagnostics of the estimate at bag time \d+\.\d{3} s:\n", summary)
     assert (tmp_path / "demo" / "node.log").read_text().count("configured") == 1
     assert (tmp_path / "demo" / "state.json").is_file()  # saved at the node's shutdown
