@@ -796,6 +796,12 @@ def plot_pareto(panels: list[Panel], title: str, path: Path) -> None:
     from matplotlib.lines import Line2D
     from matplotlib.ticker import FuncFormatter, NullFormatter
 
+    if not panels:  # e.g. --scenes wear-prior: no configuration timed on a scene
+        figure = plt.figure(figsize=(6.0, 2.0))
+        figure.text(0.5, 0.5, f"{title}:\nno configuration ran on a scene", ha="center")
+        figure.savefig(path, dpi=100)
+        plt.close(figure)
+        return
     styles = configuration_styles(name for _, points in panels for _, _, name in points)
     width_in = 4.6 * len(panels) + 1.6  # the legend's column included
     figure, axes = plt.subplots(1, len(panels), figsize=(width_in, 4.5), squeeze=False)

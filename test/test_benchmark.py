@@ -495,3 +495,11 @@ def test_every_configuration_has_its_own_pareto_style() -> None:
     assert list(styles) == [*CONFIGURATION_NAMES, "extra"]
     assert len(set(styles.values())) == len(styles)
     assert configuration_styles(["ukf", "default"])["ukf"] == styles["ukf"]
+
+
+def test_a_plan_without_scene_runs_still_draws_its_pareto(tmp_path: Path) -> None:
+    """``bench --scenes wear-prior`` ran its 20 runs and then failed on the plot ("Number of
+    columns must be a positive integer, not 0") with no results written."""
+    path = tmp_path / "pareto.png"
+    benchmark_report.plot_pareto([], "Estimator configurations", path)
+    assert path.stat().st_size > 0
