@@ -240,7 +240,7 @@ def _axial_load(fields: Mapping[str, Any], th: DiagnosticThresholds, rated_n: fl
     level = _level(fraction, th.load_warn_fraction, th.load_error_fraction)
     std = float(fields["axial_load_std_n"])  # over 10 kN at standstill: say it
     message = (
-        f"{load / 1e3:.1f} ± {std / 1e3:.1f} kN (1 sigma), {100.0 * fraction:.0f} % of rated "
+        f"{load / 1e3:.1f} ± {std / 1e3:.2g} kN (1 sigma), {100.0 * fraction:.0f} % of rated "
         f"{rated_n / 1e3:.3g} kN"
     )
     values = _picked(fields, "axial_load_n", "axial_load_std_n")

@@ -103,6 +103,9 @@ LONGEST_PREDICTION_S = 1.0
 LARGE_UPDATE_RATIO = 0.02
 ITERATION_SIGMAS = 3.0
 MAX_ITERATIONS = 3
+#: A standstill update is repeated with its noise evaluated at the updated load until the
+#: noise changes by less than this fraction (JamHypotheses._standstill_update).
+BAND_VARIANCE_TOLERANCE = 0.1
 
 
 #: Smallest variance kept on each state, relative to its initial variance.
@@ -565,6 +568,9 @@ class JamHypotheses:
         re-linearises at the latest state x_i and updates the prior with the measurement
         prediction h(x_i) + H_i (x_prior - x_i), at most MAX_ITERATIONS times.
         """
+        if block.direction == 0:
+            self._standstill_update(kf, z, block, h, linearised, polar)
+            return
         x_prior = kf.x_prior  # filterpy's copy of the predicted state (P_prior likewise)
         predicted, jacobian, variance = linearised
         for iteration in range(MAX_ITERATIONS + 1):
@@ -583,6 +589,45 @@ class JamHypotheses:
             if (float(z[0]) - mean) ** 2 <= ITERATION_SIGMAS**2 * variance:
                 return
             predicted = mean + float(jacobian @ (x_prior - kf.x))
+
+    def _standstill_update(
+        self,
+        kf: Filter,
+        z: FloatArray,
+        block: Block,
+        h: Hypothesis,
+        linearised: tuple[float, FloatArray, float],
+        polar: PolarPhasor | None,
+    ) -> None:
+        """EKF update of a standstill block, iterated on its noise: the stiction band's share
+        M_static(|F|)^2 / 3 (measurement.py) grows with the load. Evaluated at the predicted
+        load, which after a stroke's end can be kN off with a standard deviation of tens of kN,
+        it made a held torque look uninformative (a load held at zero read 0.1 +- 16 kN,
+        errors up to 40 kN at standstill with two jammed rollers). So the noise is evaluated
+        again at the updated load and the update repeated, until the noise changes by less
+        than BAND_VARIANCE_TOLERANCE (at most MAX_ITERATIONS times; the measurement is linear
+        in the load at standstill, its mean and Jacobian stay). Not where the count
+        self-locks the screw at the updated load (Prediction.self_locking): any load held by
+        the band then explains the torque, and a band evaluated at a small updated load would
+        claim the load known."""
+        predicted, jacobian, variance = linearised
+        x_prior, p_prior = kf.x_prior.copy(), kf.P_prior.copy()
+        for iteration in range(MAX_ITERATIONS + 1):
+            if iteration:
+                kf.x, kf.P = x_prior.copy(), p_prior.copy()
+            kf.update(
+                z,
+                HJacobian=_constant(jacobian[None, :]),
+                Hx=_constant(np.array([predicted])),
+                R=np.array([[variance]]),
+            )
+            if iteration == MAX_ITERATIONS:
+                return
+            at_result, _, _, noise = self._measurement(kf.x, block, h.count, h.fresh, polar)
+            settled = abs(noise - variance) <= BAND_VARIANCE_TOLERANCE * variance
+            if at_result.self_locking or settled:
+                return
+            variance = noise
 
     def _measurement(
         self,

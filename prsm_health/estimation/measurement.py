@@ -68,7 +68,9 @@ class Prediction:
     motor_torque_nm and jacobian (d/dx, one row) of the measurement; variance_nm2 of the
     measurement noise (sensors, model error, stiction band); friction_torque_nm (magnitude;
     the breakaway band at standstill); precision_loss_rate_m_per_s and fatigue_rate_per_s,
-    with their derivatives d/d|F|.
+    with their derivatives d/d|F|. self_locking: at standstill, the stiction band grows
+    faster with |F| than the load torque F L/2pi (three or more jammed rollers of the downhole
+    preset): any load the band holds explains a held torque.
     """
 
     motor_torque_nm: float
@@ -79,6 +81,7 @@ class Prediction:
     precision_loss_rate_slope: float
     fatigue_rate_per_s: float
     fatigue_rate_slope: float
+    self_locking: bool = False
 
 
 class TorqueModel:
@@ -144,7 +147,7 @@ class TorqueModel:
             # the same motor torque as a smaller resisting one; the common case wins there.
             side = load if abs(load) > self._kink_n else float(direction)
             d_screw_d_load = self._load_arm_m + direction * math.copysign(friction_slope, side)
-            band_var = 0.0
+            band_var, self_locking = 0.0, False
             if self.ripple and jammed:
                 # The ripple scales with the load torque: c, s are relative amplitudes.
                 relative = float(
@@ -160,6 +163,8 @@ class TorqueModel:
             screw_torque = load * self._load_arm_m
             d_screw_d_load = self._load_arm_m
             band_var = static**2 / 3.0
+            static_slope = healthy * slope[ROLLING] + jammed * slope[SLIDING]
+            self_locking = static_slope >= self._load_arm_m
         gear = (
             1.0 + direction * self._gear_loss * math.copysign(1.0, screw_torque)
         ) / self._gear_ratio
@@ -188,4 +193,5 @@ class TorqueModel:
             precision_loss_rate_slope=wear_speed * wear_slope,
             fatigue_rate_per_s=fatigue_speed * value[DAMAGE],
             fatigue_rate_slope=fatigue_speed * slope[DAMAGE],
+            self_locking=self_locking,
         )

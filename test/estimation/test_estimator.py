@@ -21,6 +21,7 @@ from prsm_health.benchmark import (
 from prsm_health.estimation.estimate import EstimateEvent, HealthState
 from prsm_health.estimation.estimator import GATED_BLOCKS_BEFORE_RESET, HealthEstimator
 from prsm_health.estimation.inputs import Block, RejectReason
+from prsm_health.estimation.measurement import TorqueModel
 from prsm_health.estimation.metrics import Metrics, score
 from prsm_health.estimation.params import EstimatorParams, Fidelity, FilterParams, ModelParams
 from prsm_health.scenes.scene import Scene, scene_from_mapping
@@ -164,6 +165,32 @@ def test_a_second_jam_at_standstill_that_turns_the_ripple_is_identified() -> Non
     identified, missed = second_jam_delays(scene, walk, (getattr(ModelParams(), walk), 0.3))
     assert identified is not None and identified < cycle_s
     assert missed is None
+
+
+def test_the_load_at_standstill_is_held_to_its_band_at_the_updated_load() -> None:
+    """With two jammed rollers the stiction band, evaluated at the load predicted past the
+    stroke's end, made every standstill uninformative: errors of up to 11 kN (RMSE 4.5 kN)
+    on a load held at zero, where the estimates now stay within tens of newtons."""
+    two_jams = [{"time_s": 2.0, "roller": 2}, {"time_s": 3.0, "roller": 7}]
+    states, metrics, _ = run(downhole(jams=two_jams))
+    assert [jam.delay_s is not None and jam.delay_s < 0.1 for jam in metrics.jams] == [True] * 2
+    assert sum(s.event == EstimateEvent.STANDSTILL for s in states) > 10
+    assert metrics.load_standstill_max_error_n < 200.0
+    assert metrics.load_standstill_coverage_2sigma >= 0.95
+
+
+def test_three_jammed_rollers_self_lock_the_screw_at_standstill() -> None:
+    """Their sliding torque grows faster with the load than the load torque (docs/estimation.md):
+    any held load explains a held torque, and the standstill update does not narrow the band
+    at a small updated load."""
+    model = TorqueModel(DEFAULT)
+    still = Block(0.0, 0.5, 500, 0.0, 0.0, 0.0, 1.0, 0.0, direction=0)
+    moving = dataclasses.replace(still, motor_speed_rad_s=150.0, direction=1)
+    for load in (1e3, 20e3, 50e3):
+        x = np.r_[load, np.zeros(model.dim - 1)]
+        locked = [model.predict(x, still, jammed).self_locking for jammed in range(4)]
+        assert locked == [False, False, False, True]
+        assert not model.predict(x, moving, 3).self_locking
 
 
 def test_a_jam_at_standstill_survives_a_slow_stroke() -> None:
