@@ -135,7 +135,7 @@ class FilterEvents:
 class PersistenceHealth:
     """The state file: where, when last saved, what happened at restore and at the last save.
 
-    restored: the estimator resumed from the file at configure. kept_corrupt: where an
+    restored: the estimator resumed from the file at configure. kept_aside: where an
     unusable state file was moved aside (None if none was), with the reason in problem; a
     restored file's problem is a part of it not used (its last estimate, or the filters' states
     saved under other drive-train or model parameters).
@@ -146,7 +146,7 @@ class PersistenceHealth:
     last_save_s: float | None = None
     saves: int = 0
     restored: bool = False
-    kept_corrupt: str | None = None
+    kept_aside: str | None = None
     problem: str = ""
     save_error: str | None = None
 
@@ -399,9 +399,9 @@ def persistence_status(
     age = max(now_s - health.last_save_s, 0.0) if health.last_save_s is not None else -1.0
     if health.save_error is not None:
         level, message = Level.ERROR, f"cannot save the state: {health.save_error}"
-    elif health.kept_corrupt is not None:
+    elif health.kept_aside is not None:
         level = Level.WARN
-        message = f"{health.problem}; kept as {health.kept_corrupt}, started fresh"
+        message = f"{health.problem}; kept as {health.kept_aside}, started fresh"
     elif health.last_save_s is not None:
         level, message = Level.OK, f"saved {age:.0f} s ago"
     elif health.restored:
@@ -411,8 +411,8 @@ def persistence_status(
         level, message = Level.OK, "not saved yet"
     numbers = {"saves": health.saves, "last_save_age_s": age, "restored": int(health.restored)}
     values = [*_numbers(numbers), ("state_file", health.state_file)]
-    if health.kept_corrupt is not None:
-        values.append(("kept_corrupt", health.kept_corrupt))
+    if health.kept_aside is not None:
+        values.append(("kept_aside", health.kept_aside))
     return DiagnosticStatusData(PERSISTENCE, level, message, hardware_id, values)
 
 

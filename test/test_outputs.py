@@ -226,12 +226,12 @@ def test_persistence_status() -> None:
     fresh = persistence_status(PersistenceHealth(state_file="/s.json"), "left", NOW)
     assert (fresh.name, fresh.level) == (PERSISTENCE, Level.OK)
     kept = PersistenceHealth(
-        state_file="/s.json", kept_corrupt="/s.json.corrupt-x", problem="unusable state file"
+        state_file="/s.json", kept_aside="/s.json.corrupt-x", problem="unusable state file"
     )
     status = persistence_status(kept, "left", NOW)
     assert status.level == Level.WARN
     assert "/s.json.corrupt-x" in status.message
-    assert ("kept_corrupt", "/s.json.corrupt-x") in status.values
+    assert ("kept_aside", "/s.json.corrupt-x") in status.values
     failing = PersistenceHealth(state_file="/s.json", save_error="disk full")
     assert persistence_status(failing, "left", NOW).level == Level.ERROR
     saved = PersistenceHealth(state_file="/s.json", saves=1, last_save_s=NOW - 4.0)

@@ -56,6 +56,11 @@ class SnapshotError(ValueError):
     """A saved estimator state cannot be resumed (malformed, or of another screw)."""
 
 
+class ForeignStateError(SnapshotError):
+    """A well-formed saved state of another screw (or actuator): not damaged, only not this
+    one's, so it can resume once the parameters match again."""
+
+
 def _digest(parts: tuple[object, ...]) -> str:
     return hashlib.sha256(repr(parts).encode()).hexdigest()[:16]
 
@@ -185,12 +190,12 @@ class HealthEstimator:
                 raise SnapshotError(f"format {snapshot['format']!r}, expected {SNAPSHOT_FORMAT}")
             whole = bool(snapshot["actuator"] == actuator_fingerprint(self.params))
             if not whole and "screw" not in snapshot:  # saved before the screw's own digest
-                raise SnapshotError(
+                raise ForeignStateError(
                     "the state belongs to another actuator (the preset or the drive train "
                     "differ; the state does not say which): refusing to resume from it"
                 )
             if not whole and snapshot["screw"] != screw_fingerprint(self.params):
-                raise SnapshotError(
+                raise ForeignStateError(
                     "the state belongs to another screw (the preset's geometry, materials, "
                     "friction, wear or fatigue differ): refusing to resume from it"
                 )

@@ -321,13 +321,13 @@ class HealthNode(LifecycleNode):
         self._persistence = PersistenceHealth(
             state_file=str(config.state_file),
             restored=outcome.restored,
-            kept_corrupt=str(outcome.kept_corrupt) if outcome.kept_corrupt else None,
+            kept_aside=str(outcome.kept_aside) if outcome.kept_aside else None,
             problem=outcome.problem,
         )
-        if outcome.kept_corrupt is not None:
+        if outcome.kept_aside is not None:
             estimator = HealthEstimator(config.estimator)  # fresh: restore may have failed late
             self.get_logger().error(
-                f"{outcome.problem}; kept as {outcome.kept_corrupt}; starting fresh"
+                f"{outcome.problem}; kept as {outcome.kept_aside}; starting fresh"
             )
         elif outcome.restored:
             self.get_logger().info(f"resumed from {config.state_file}")

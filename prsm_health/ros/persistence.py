@@ -15,12 +15,14 @@ Saving is atomic: the text goes to a temporary file in the same directory, which
 fsync'ed and renamed over the state file; then the directory is fsync'ed, so after a crash or
 power loss the file is either the old or the new state, never a mix.
 
-Restoring: a missing file means a fresh start. A file that cannot be used (not JSON, not this
-format, another hardware_id, or refused by :meth:`HealthEstimator.restore`: malformed, or
-another screw's) is moved aside to ``<name>.corrupt-<UTC time>`` and reported; the estimator
-then starts fresh. A bad file is therefore never silently replaced by zeros. A state of the
-same screw saved under another drive train, misalignment or ripple setting resumes the
-screw's part (degradation, jam counts; the restore says so in :attr:`RestoreOutcome.problem`).
+Restoring: a missing file means a fresh start. A file that cannot be used is moved aside and
+reported, and the estimator starts fresh: to ``<name>.corrupt-<UTC time>`` if it is damaged
+(not JSON, not this format, malformed), to ``<name>.foreign-<UTC time>`` if it is a sound
+state of another actuator (another hardware_id, or another screw: a wrong preset given by
+mistake), which resumes once moved back under parameters that match. A bad file is therefore
+never silently replaced by zeros. A state of the same screw saved under another drive train,
+misalignment or ripple setting resumes the screw's part (degradation, jam counts; the restore
+says so in :attr:`RestoreOutcome.problem`).
 A malformed ``last_estimate`` alone (or one of another version, with other fields) loses only
 itself: the state is restored and the problem reported.
 """
@@ -38,9 +40,13 @@ from pathlib import Path
 from typing import Any
 
 from prsm_health.estimation.estimate import EstimateEvent, HealthState
-from prsm_health.estimation.estimator import HealthEstimator, SnapshotError
+from prsm_health.estimation.estimator import ForeignStateError, HealthEstimator, SnapshotError
 
 FORMAT = "prsm_health.state/1"
+#: Suffixes of a state file kept aside: damaged, or a sound state of another actuator (another
+#: screw, or another hardware_id), which resumes once moved back under matching parameters.
+CORRUPT_SUFFIX = "corrupt"
+FOREIGN_SUFFIX = "foreign"
 #: The problem of a state file restored for the same screw under other parameters
 #: (:meth:`HealthEstimator.restore`).
 PARAMETERS_CHANGED = (
@@ -64,7 +70,7 @@ class RestoreOutcome:
     (``problem`` says why)."""
 
     restored: bool
-    kept_corrupt: Path | None = None
+    kept_aside: Path | None = None
     problem: str = ""
     last_estimate: HealthState | None = None
 
@@ -120,6 +126,12 @@ class StateStore:
         try:
             document = json.loads(text)
             whole = estimator.restore(self._snapshot(document))
+        except ForeignStateError as exc:
+            problem = (
+                f"state file {self.path} of another actuator ({exc}); to resume from it, move "
+                "it back and start with parameters that match"
+            )
+            return self._keep_aside(problem, FOREIGN_SUFFIX)
         except ValueError as exc:  # JSONDecodeError and SnapshotError are ValueErrors
             return self._keep_aside(f"unusable state file {self.path}: {exc}")
         except RecursionError:  # json.loads of lists nested thousands deep
@@ -136,7 +148,7 @@ class StateStore:
         if not isinstance(document, dict) or document.get("format") != FORMAT:
             raise SnapshotError(f"not a {FORMAT} document")
         if document.get("hardware_id") != self.hardware_id:
-            raise SnapshotError(
+            raise ForeignStateError(
                 f"it belongs to hardware_id {document.get('hardware_id')!r},"
                 f" not {self.hardware_id!r}"
             )
@@ -145,15 +157,16 @@ class StateStore:
             raise SnapshotError("no estimator state")
         return snapshot
 
-    def _keep_aside(self, problem: str) -> RestoreOutcome:
+    def _keep_aside(self, problem: str, suffix: str = CORRUPT_SUFFIX) -> RestoreOutcome:
+        """Move the file to ``<name>.<suffix>-<UTC time>`` (a number added if that exists)."""
         stamp = time.strftime("%Y%m%dT%H%M%SZ", time.gmtime())
-        target = self.path.with_name(f"{self.path.name}.corrupt-{stamp}")
+        target = self.path.with_name(f"{self.path.name}.{suffix}-{stamp}")
         n = 1
         while target.exists():
             n += 1
-            target = self.path.with_name(f"{self.path.name}.corrupt-{stamp}-{n}")
+            target = self.path.with_name(f"{self.path.name}.{suffix}-{stamp}-{n}")
         os.replace(self.path, target)
-        return RestoreOutcome(restored=False, kept_corrupt=target, problem=problem)
+        return RestoreOutcome(restored=False, kept_aside=target, problem=problem)
 
 
 def _estimate_document(state: HealthState | None) -> dict[str, Any] | None:

@@ -152,7 +152,7 @@ def test_malformed_inputs_are_counted_not_published(ros: None, tmp_path: Path) -
         assert set(STATUS_NAMES) <= set(statuses)
         for status in statuses.values():
             for key, value in status["values"].items():
-                if key not in ("state_file", "kept_corrupt"):
+                if key not in ("state_file", "kept_aside"):
                     assert math.isfinite(float(value)), (hardware_id, key, value)
         estimates = health[hardware_id].health
         for estimate in estimates:

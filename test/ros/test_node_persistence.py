@@ -169,13 +169,13 @@ def test_corrupt_and_foreign_state_files_are_kept_aside(ros: None, tmp_path: Pat
     finally:
         listener.close()
 
-    for name, problem, text in (
-        ("corrupt", "unusable state file", corrupt_text),
-        ("foreign", "another screw", foreign_text),
+    for name, problem, text, suffix in (
+        ("corrupt", "unusable state file", corrupt_text, "corrupt"),
+        ("foreign", "another screw", foreign_text, "foreign"),
     ):
         status = listener.statuses(name)[PERSISTENCE]
-        kept = Path(status["values"]["kept_corrupt"])
-        assert kept.parent == tmp_path and kept.name.startswith(f"{name}.json.corrupt-")
+        kept = Path(status["values"]["kept_aside"])
+        assert kept.parent == tmp_path and kept.name.startswith(f"{name}.json.{suffix}-")
         assert kept.read_text() == text  # the bad file is kept as it was
         assert problem in status["message"] and "started fresh" in status["message"]
         log = next(n for n in nodes if n.name == name).log()

@@ -50,7 +50,7 @@ def test_save_then_restore_round_trips(
     assert list(tmp_path.joinpath("deep").iterdir()) == [store.path]  # no temporary left
     fresh = HealthEstimator(params)
     outcome = store.restore(fresh)
-    assert outcome.restored and outcome.kept_corrupt is None
+    assert outcome.restored and outcome.kept_aside is None
     assert fresh.snapshot()["degradation"] == worn.snapshot()["degradation"]
 
 
@@ -99,7 +99,7 @@ def test_a_malformed_last_estimate_loses_only_itself(
     store.path.write_text(json.dumps(document))
     resumed = HealthEstimator(params)
     outcome = store.restore(resumed)
-    assert outcome.restored and outcome.kept_corrupt is None and outcome.last_estimate is None
+    assert outcome.restored and outcome.kept_aside is None and outcome.last_estimate is None
     assert "last estimate of" in outcome.problem and "malformed last estimate" in outcome.problem
     assert resumed.snapshot()["degradation"] == worn.snapshot()["degradation"]
     status = persistence_status(
@@ -110,7 +110,7 @@ def test_a_malformed_last_estimate_loses_only_itself(
 
 def test_missing_file_is_a_fresh_start(tmp_path: Path, params: EstimatorParams) -> None:
     outcome = StateStore(tmp_path / "none.json", "left").restore(HealthEstimator(params))
-    assert not outcome.restored and outcome.kept_corrupt is None
+    assert not outcome.restored and outcome.kept_aside is None
 
 
 @pytest.mark.parametrize(
@@ -131,9 +131,9 @@ def test_corrupt_file_is_kept_aside(
     before = estimator.snapshot()
     outcome = StateStore(path, "left").restore(estimator)
     assert not outcome.restored
-    assert outcome.kept_corrupt is not None
-    assert outcome.kept_corrupt.name.startswith("left.json.corrupt-")
-    assert outcome.kept_corrupt.read_text() == content
+    assert outcome.kept_aside is not None
+    assert outcome.kept_aside.name.startswith("left.json.corrupt-")
+    assert outcome.kept_aside.read_text() == content
     assert not path.exists()
     assert reason in outcome.problem
     assert estimator.snapshot() == before
@@ -148,7 +148,7 @@ def test_malformed_estimator_state_is_kept_aside(
     document["estimator"]["hypotheses"] = "garbage"
     store.path.write_text(json.dumps(document))
     outcome = store.restore(HealthEstimator(params))
-    assert outcome.kept_corrupt is not None
+    assert outcome.kept_aside is not None
     assert outcome.problem.startswith(f"unusable state file {store.path}: ")
 
 
@@ -177,7 +177,7 @@ def test_values_the_outputs_cannot_carry_are_kept_aside(
     (state if section is None else state[section])[key] = value
     store.path.write_text(json.dumps(document))
     outcome = store.restore(HealthEstimator(params))
-    assert outcome.kept_corrupt is not None and problem in outcome.problem
+    assert outcome.kept_aside is not None and problem in outcome.problem
 
 
 def test_state_of_the_same_screw_under_another_drive_train_is_resumed_in_part(
@@ -197,7 +197,7 @@ def test_state_of_the_same_screw_under_another_drive_train_is_resumed_in_part(
     )
     fresh = HealthEstimator(recalibrated)
     outcome = store.restore(fresh)
-    assert outcome.restored and outcome.kept_corrupt is None
+    assert outcome.restored and outcome.kept_aside is None
     assert outcome.problem == PARAMETERS_CHANGED and outcome.last_estimate is not None
     assert fresh.snapshot()["degradation"] == worn.snapshot()["degradation"]
     assert list(tmp_path.iterdir()) == [store.path]
@@ -206,21 +206,30 @@ def test_state_of_the_same_screw_under_another_drive_train_is_resumed_in_part(
     assert status.message == f"resumed from the state file; {PARAMETERS_CHANGED}"
 
 
-def test_state_of_another_actuator_or_hardware_is_refused(
+def test_state_of_another_actuator_or_hardware_is_kept_aside_as_foreign(
     tmp_path: Path, params: EstimatorParams, worn: HealthEstimator
 ) -> None:
-    other = HealthEstimator(params_from_mapping({"actuator": {"preset": "meng2021-fractal"}}))
-    StateStore(tmp_path / "left.json", "left").save(other)
+    """Sound states of another screw (a wrong preset given by mistake) or hardware id were
+    kept as ".corrupt": they are not, and resume once moved back under matching parameters."""
+    fractal = params_from_mapping({"actuator": {"preset": "meng2021-fractal"}})
+    StateStore(tmp_path / "left.json", "left").save(HealthEstimator(fractal))
     outcome = StateStore(tmp_path / "left.json", "left").restore(HealthEstimator(params))
-    assert outcome.kept_corrupt is not None
-    assert "another screw" in outcome.problem
+    assert outcome.kept_aside is not None and outcome.kept_aside.name.startswith(
+        "left.json.foreign-"
+    )
+    assert "another screw" in outcome.problem and "move it back" in outcome.problem
+    os.replace(outcome.kept_aside, tmp_path / "left.json")  # the right preset again
+    assert StateStore(tmp_path / "left.json", "left").restore(HealthEstimator(fractal)).restored
 
     StateStore(tmp_path / "right.json", "right").save(worn)
     os.replace(tmp_path / "right.json", tmp_path / "left.json")
     outcome = StateStore(tmp_path / "left.json", "left").restore(HealthEstimator(params))
-    assert outcome.kept_corrupt is not None
+    assert outcome.kept_aside is not None
     assert "hardware_id 'right'" in outcome.problem
-    assert len(list(tmp_path.glob("left.json.corrupt-*"))) == 2  # both kept, distinct names
+    StateStore(tmp_path / "right.json", "right").save(worn)
+    os.replace(tmp_path / "right.json", tmp_path / "left.json")
+    assert StateStore(tmp_path / "left.json", "left").restore(HealthEstimator(params)).kept_aside
+    assert len(list(tmp_path.glob("left.json.foreign-*"))) == 2  # both kept, distinct names
 
 
 def test_failed_save_leaves_the_old_file(
