@@ -265,7 +265,8 @@ def node_config(values: Mapping[str, Any], errors: Mapping[str, str] | None = No
     except (YamlError, PhysicsError, ValueError) as exc:
         if values["preset"] and "preset" in getattr(exc, "field", ""):
             raise ConfigError({"preset": str(exc)}) from exc
-        raise ConfigError({"params_file": f"{params_file}: {exc}"}) from exc
+        named = exc if isinstance(exc, YamlError) else f"{params_file}: {exc}"  # YAML's names it
+        raise ConfigError({"params_file": str(named)}) from exc
 
     input_type = values["input_type"]
     topic = values["input_topic"] or (
