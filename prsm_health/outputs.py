@@ -21,6 +21,7 @@ from __future__ import annotations
 
 import enum
 import math
+import re
 from collections import Counter
 from collections.abc import Mapping
 from dataclasses import dataclass, field, replace
@@ -43,6 +44,17 @@ PERSISTENCE = "prsm_health: persistence"
 CONFIGURATION = "prsm_health: configuration"
 #: The diagnostics' hardware_id when none is given (the node's parameter, replay's option).
 DEFAULT_HARDWARE_ID = "prsm_actuator"
+#: What a hardware_id may be (it names the node's state file too).
+HARDWARE_ID_PATTERN = "[A-Za-z0-9_.-]+"
+
+
+def hardware_id_problem(hardware_id: str) -> str | None:
+    """Why ``hardware_id`` cannot be one (None if it can): the node's and replay's check."""
+    if re.fullmatch(HARDWARE_ID_PATTERN, hardware_id):
+        return None
+    return f"must match {HARDWARE_ID_PATTERN}, got {hardware_id!r}"
+
+
 #: The statuses of the estimate itself (the rest are about the inputs and the filter).
 ESTIMATE_STATUS_NAMES = (AXIAL_LOAD, JAMMED_ROLLERS, PRECISION_LOSS, FATIGUE)
 #: The estimator statuses, in the order :func:`diagnostic_statuses` returns them.

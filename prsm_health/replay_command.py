@@ -35,7 +35,7 @@ from prsm_health.estimation.params import (
     params_from_mapping,
 )
 from prsm_health.interrupt import EXIT_INTERRUPTED, removed_on_abort, stop_on_interrupt
-from prsm_health.outputs import DEFAULT_HARDWARE_ID
+from prsm_health.outputs import DEFAULT_HARDWARE_ID, hardware_id_problem
 from prsm_health.replay import ReplayResult, replay
 from prsm_health.scenes.recording import (
     SceneActuator,
@@ -90,11 +90,19 @@ def add_replay_command(commands: Any) -> None:
     )
     parser.add_argument(
         "--hardware-id",
+        type=_hardware_id,
         default=DEFAULT_HARDWARE_ID,
         metavar="ID",
         help=f"the diagnostics' hardware_id in --out (default {DEFAULT_HARDWARE_ID}, the node's)",
     )
     parser.set_defaults(handler=run_replay)
+
+
+def _hardware_id(text: str) -> str:
+    """A hardware_id the node would accept (argparse type)."""
+    if problem := hardware_id_problem(text):
+        raise argparse.ArgumentTypeError(problem)
+    return text
 
 
 def _params(args: argparse.Namespace) -> tuple[EstimatorParams, str, SceneActuator | None]:

@@ -262,6 +262,11 @@ def test_cli_refuses_a_missing_bag_and_bad_params_in_one_line(
     assert main(["replay", str(tmp_path / "nope"), "--params", str(bad)]) == 2
     err = capsys.readouterr().err
     assert err.count("\n") == 1 and f"--params: {bad}: filter.block_duration_s" in err
+    # A hardware_id the node refuses (it names the state file) was written into --out.
+    with pytest.raises(SystemExit) as exit_info:
+        main(["replay", str(tmp_path / "nope"), "--hardware-id", "left arm"])
+    assert exit_info.value.code == 2
+    assert "--hardware-id: must match [A-Za-z0-9_.-]+, got 'left arm'" in capsys.readouterr().err
 
 
 def test_cli_checks_output_paths_before_the_replay_and_makes_the_metrics_folder(

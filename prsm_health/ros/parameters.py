@@ -15,7 +15,6 @@ the next configure (so a bad value can be fixed through the lifecycle without a 
 from __future__ import annotations
 
 import math
-import re
 from collections.abc import Mapping
 from dataclasses import dataclass
 from pathlib import Path
@@ -30,14 +29,13 @@ from prsm_health.estimation.params import (
     load_params_mapping,
     params_from_mapping,
 )
-from prsm_health.outputs import DEFAULT_HARDWARE_ID
+from prsm_health.outputs import DEFAULT_HARDWARE_ID, hardware_id_problem
 from prsm_health.physics.errors import PhysicsError
 from prsm_health.ros.persistence import default_state_file
 from prsm_health.yamlio import YamlError
 
 PACKAGE = "prsm_health"
 NODE_NAME = "prsm_health"
-_HARDWARE_ID = re.compile(r"[A-Za-z0-9_.\-]+")
 #: A slower ~/health timer than this is refused (its period in ns would overflow rcl's int64
 #: near 1e-10 Hz; nobody wants one estimate a minute either).
 LOWEST_HEALTH_RATE_HZ = 0.01
@@ -244,8 +242,8 @@ def node_config(values: Mapping[str, Any], errors: Mapping[str, str] | None = No
         if spec.name not in problems and (problem := spec.problem(values[spec.name])):
             problems[spec.name] = problem
     hardware_id = str(values["hardware_id"])
-    if "hardware_id" not in problems and not _HARDWARE_ID.fullmatch(hardware_id):
-        problems["hardware_id"] = f"must match [A-Za-z0-9_.-]+, got {hardware_id!r}"
+    if "hardware_id" not in problems and (problem := hardware_id_problem(hardware_id)):
+        problems["hardware_id"] = problem
     if "input_topic" not in problems and values["input_topic"]:
         try:
             validate_topic_name(values["input_topic"])
