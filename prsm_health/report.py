@@ -171,6 +171,15 @@ def _load_figure(series: _Series, truth: TruthSamples | None, *, xlabel: str, ti
     return figure
 
 
+def _estimates_span(figure: Figure, stamps_s: FloatArray) -> None:
+    """Every time axis of ``figure`` over the estimates' span (1 % margin): the truth of a
+    replay stopped or damaged early runs on beyond it, and squeezed the estimates."""
+    first, last = float(np.nanmin(stamps_s)), float(np.nanmax(stamps_s))
+    margin = 0.01 * ((last - first) or 1.0)
+    for axis in figure.axes:
+        axis.set_xlim(first - margin, last + margin)
+
+
 def write_report(
     directory: Path,
     states: list[HealthState],
@@ -225,6 +234,8 @@ def write_report(
     axis.legend(loc="best")
     figures.append(figure)
 
+    for figure in figures:
+        _estimates_span(figure, t)
     files = []
     for name, figure in zip(PLOTS, figures, strict=True):
         path = directory / name

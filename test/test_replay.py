@@ -29,7 +29,7 @@ from prsm_health.cli import main
 from prsm_health.estimation.estimate import EstimateEvent
 from prsm_health.estimation.params import EstimatorParams
 from prsm_health.replay import ReplayResult, replay
-from prsm_health.report import _band, _load_figure, _series, plt
+from prsm_health.report import _band, _estimates_span, _load_figure, _series, plt
 from prsm_health.ros.parameters import SPECS
 from prsm_health.scenes.recording import record
 from prsm_health.scenes.scene import load_scene, scene_from_mapping
@@ -157,6 +157,11 @@ def test_the_report_draws_the_estimates_on_the_truths_clock_after_a_time_reset()
     assert rms_error_kn(on_sensor_clock.stamp_s[after], on_sensor_clock.load_kn[after]) > 2.0
     assert np.array_equal(drawn.stamp_s[: reset[0]], on_sensor_clock.stamp_s[: reset[0]])
 
+    # A replay that stopped at 20 s is drawn over its 20 s, not over the truth's 60 s.
+    early = _series(result.states[: reset[0] // 2], None)
+    figure = _load_figure(early, truth, xlabel="t", title="stopped")
+    _estimates_span(figure, early.stamp_s)
+    assert all(axis.get_xlim()[1] < 21.0 for axis in figure.axes)
     # The reset is marked where it is drawn (nothing showed where the time line restarted).
     figure = _load_figure(drawn, truth, xlabel="t", title="sensor-faults")
     marks = [line for line in figure.axes[0].get_lines() if line.get_label() == "sensor time reset"]
