@@ -109,7 +109,7 @@ class InputHealth:
     start. rejected: samples rejected since start, by reason (the estimator's reasons in lower
     case, plus the caller's own, e.g. ``joint_missing``). recent_rejected_fraction: share of
     the samples judged over the last second that were rejected; recent_rejected: those, by
-    reason.
+    reason. topic: the input topic (empty if unknown), named while no input came.
     """
 
     rate_hz: float
@@ -119,6 +119,7 @@ class InputHealth:
     rejected: Mapping[str, int]
     recent_rejected_fraction: float = 0.0
     recent_rejected: Mapping[str, int] = field(default_factory=dict)
+    topic: str = ""
 
 
 @dataclass(frozen=True)
@@ -323,7 +324,8 @@ def _inputs(inputs: InputHealth, th: DiagnosticThresholds, now_s: float) -> _Par
         "recent_rejected_fraction": inputs.recent_rejected_fraction,
     }
     values.update({f"rejected_{reason}": count for reason, count in inputs.rejected.items()})
-    return (Level.WARN if problems else Level.OK), message, _numbers(values)
+    named = [("input_topic", inputs.topic)] if inputs.topic else []
+    return (Level.WARN if problems else Level.OK), message, [*_numbers(values), *named]
 
 
 def _recent(at_s: float | None, now_s: float) -> bool:
@@ -390,8 +392,8 @@ def diagnostic_statuses(
     parts.append((FILTER_CONSISTENCY, _consistency(fields, events, now_s)))
 
     stale = None
-    if inputs.last_sample_s is None:
-        stale = "stale: no input yet"
+    if inputs.last_sample_s is None:  # a wrong topic shows here: say which one is listened to
+        stale = f"stale: no input yet on {inputs.topic}" if inputs.topic else "stale: no input yet"
     elif now_s - inputs.last_sample_s > thresholds.stale_timeout_s:
         stale = f"stale: no input for {now_s - inputs.last_sample_s:.1f} s"
     statuses = []

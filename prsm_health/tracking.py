@@ -37,10 +37,12 @@ class InputTracker:
 
     Times are the caller's clock in seconds; if it jumps back (a looped bag's sim time), the
     window starts again. Counts are of this run: totals an estimator brings from a restored
-    state are its starting point (:meth:`start_from`), not samples judged now.
+    state are its starting point (:meth:`start_from`), not samples judged now. ``topic``: where
+    the inputs come from (named by the input-health status; empty if unknown).
     """
 
     def __init__(self) -> None:
+        self.topic = ""
         self._received_total = 0
         self._last_sample_s: float | None = None
         self._received: deque[tuple[float, int]] = deque()
@@ -102,6 +104,7 @@ class InputTracker:
             },
             recent_rejected_fraction=sum(recent.values()) / judged if judged > 0 else 0.0,
             recent_rejected=dict(recent),
+            topic=self.topic,
         )
 
 

@@ -206,6 +206,12 @@ def test_every_status_is_stale_without_recent_input() -> None:
     assert all(message.startswith("stale: no input for 2.0 s") for _, message, _ in result.values())
     never = statuses(i=inputs(last_sample_s=None), th=th)
     assert {level for level, _, _ in never.values()} == {Level.STALE}
+    # A wrong input_topic shows here: the statuses name the topic listened to.
+    named = statuses(i=inputs(last_sample_s=None, topic="/left/motor_state"), th=th)
+    assert all(
+        m.startswith("stale: no input yet on /left/motor_state;") for _, m, _ in named.values()
+    )
+    assert named[INPUT_HEALTH][2]["input_topic"] == "/left/motor_state"
     assert statuses(i=inputs(last_sample_s=NOW - 0.4), th=th)[AXIAL_LOAD][0] == Level.OK
 
 

@@ -161,10 +161,10 @@ def summary(
         f" ({health['samples_accepted']} samples accepted,"
         f" {health['samples_rejected']} rejected):",
         f"  axial load      {health['axial_load_n'] / 1e3:.2f} kN"
-        f" +- {health['axial_load_std_n'] / 1e3:.2f} kN",
+        f" ± {health['axial_load_std_n'] / 1e3:.2f} kN",
         f"  jammed rollers  {health['jammed_rollers_most_likely']} most likely ({shown})",
         f"  precision loss  {health['precision_loss_um']:.4g} um"
-        f" +- {health['precision_loss_std_um']:.2g} um"
+        f" ± {health['precision_loss_std_um']:.2g} um"
         f" (rate {health['precision_loss_rate_um_per_h']:.3g} um/h)",
     ]
     if truth is not None:

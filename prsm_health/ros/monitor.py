@@ -156,7 +156,7 @@ def health_line(record: dict[str, Any]) -> str:
     """One line of the latest estimate."""
     return (
         f"t {record['stamp']:.2f} s  load {record['axial_load_n'] / 1e3:.2f}"
-        f" +- {record['axial_load_std_n'] / 1e3:.2f} kN"
+        f" ± {record['axial_load_std_n'] / 1e3:.2f} kN"
         f"  jammed {record['jammed_rollers_most_likely']} ({jam_probability(record)})"
         f"  loss {record['precision_loss_um']:.4g} um"
         f" ({record['precision_loss_rate_um_per_h']:.3g} um/h)"

@@ -373,6 +373,7 @@ class HealthNode(LifecycleNode):
             self._subscription = self.create_subscription(
                 JointState, config.input_topic, self._on_input, qos
             )
+        self._tracker.inputs.topic = self._subscription.topic_name  # resolved: /ns/motor_state
         self._timers = [
             self.create_timer(config.batch_period_s, self._on_batch, clock=self._steady),
             self.create_timer(1.0 / config.diagnostics_rate_hz, self._on_diagnostics),
@@ -416,6 +417,8 @@ class HealthNode(LifecycleNode):
             self.destroy_timer(timer)
         self._timers = []
         self._save()
+        if self._store is not None and self._persistence.save_error is None:
+            self.get_logger().info(f"inputs stopped; the state is saved in {self._store.path}")
 
     def _release(self) -> None:
         """Drop what configure created."""

@@ -134,6 +134,7 @@ def test_kill9_restart_resumes_and_sigterm_saves(ros: None, tmp_path: Path) -> N
         resumed.finish()  # the node estimated the last block at its shutdown
         assert_close(restored(params, state_file).snapshot(), resumed.snapshot())
         assert "Traceback" not in node.log()
+        assert f"inputs stopped; the state is saved in {state_file}" in node.log()  # was silent
     finally:
         listener.close()
 
@@ -228,7 +229,7 @@ def test_the_restored_estimate_is_reported_until_a_new_one(ros: None, tmp_path: 
         assert saved["stamp_s"] == pytest.approx(stamp_s) and saved["jam_probabilities"][2] == 1
 
         restored = (
-            "stale: no input yet; last: 2 jammed rollers (p = 1.00)"
+            "stale: no input yet on /motor_state; last: 2 jammed rollers (p = 1.00)"
             f" (restored, estimate at sensor time {stamp_s:.3f} s)"
         )
         for _ in range(2):  # the second restart resumes from what the first saved at shutdown
@@ -252,7 +253,7 @@ def test_the_restored_estimate_is_reported_until_a_new_one(ros: None, tmp_path: 
             listener.wait_for(
                 lambda: (
                     jam_status().get("message")
-                    == "stale: no input yet; last: no jammed roller (p(jam) = 0)"
+                    == "stale: no input yet on /motor_state; last: no jammed roller (p(jam) = 0)"
                 ),
                 10.0,
                 "the restored estimate brought up to the reset",

@@ -201,7 +201,8 @@ def test_play_plays_a_damaged_bag_up_to_the_damage(ros: None, tmp_path: Path) ->
         listener.close()
     played = f"/motor_state {counts[topics[0]]}, /truth/state {counts[topics[1]]}"
     assert f"play done: {played} published in 1 pass(es)" in out
-    warning, error = err.splitlines()
+    note, warning, error = err.splitlines()
+    assert note.startswith(f"note: the scene of {bag} accelerates wear x100000;")
     assert warning == (
         f"prsm-health play: warning: the bag is damaged: the {len(expected)} messages"
         f" before the damage are played ({played})"
@@ -231,7 +232,8 @@ def test_play_ends_at_a_corrupt_chunk_of_a_bag_whose_summary_is_intact(tmp_path:
     mcap.write_bytes(bytes(data))
     played = cli("play", str(copy), "--rate", "1e6")
     assert played.returncode == 1, played.stdout + played.stderr
-    (error,) = played.stderr.splitlines()
+    note, error = played.stderr.splitlines()
+    assert note.startswith(f"note: the scene of {copy} accelerates wear x100000;")
     found = re.fullmatch(
         rf"prsm-health play: error: played up to the damage: {re.escape(str(copy))}: "
         r"unreadable after (\d+) messages: \w+: .+",
@@ -556,8 +558,7 @@ def test_monitor_shows_foreign_messages_as_they_are(ros: None) -> None:
         node.destroy_node()
     assert (shown.returncode, err) == (0, "")
     assert out.splitlines()[-2:] == [
-        "t 0.00 s  load 0.00 +- 0.00 kN  jammed 0 (no probabilities)  loss 0 um (0 um/h)"
-        "  fatigue 0",
+        "t 0.00 s  load 0.00 ± 0.00 kN  jammed 0 (no probabilities)  loss 0 um (0 um/h)  fatigue 0",
         "  level 7 (unknown) axial load         odd",
     ]
     assert "other" not in out  # the status of the other hardware id
@@ -586,7 +587,7 @@ def test_monitor_table() -> None:
     }
     text = table(health, {"status": [status]})
     assert text.splitlines() == [
-        "t 12.50 s  load 30.50 +- 0.25 kN  jammed 1 (p 0.97)  loss 1.25 um (3.5 um/h)"
+        "t 12.50 s  load 30.50 ± 0.25 kN  jammed 1 (p 0.97)  loss 1.25 um (3.5 um/h)"
         "  fatigue 0.001",
         "  ERROR jammed rollers     1 jammed roller (p = 0.97)",
     ]
