@@ -574,14 +574,7 @@ class JamHypotheses:
         x_prior = kf.x_prior  # filterpy's copy of the predicted state (P_prior likewise)
         predicted, jacobian, variance = linearised
         for iteration in range(MAX_ITERATIONS + 1):
-            if iteration:
-                kf.x, kf.P = x_prior.copy(), kf.P_prior.copy()
-            kf.update(
-                z,
-                HJacobian=_constant(jacobian[None, :]),
-                Hx=_constant(np.array([predicted])),
-                R=np.array([[variance]]),
-            )
+            _update_prior(kf, z, (predicted, jacobian, variance))
             moved = abs(float(kf.x[LOAD] - x_prior[LOAD]))
             if iteration == MAX_ITERATIONS or moved <= self._large_update_n:
                 return
@@ -611,16 +604,8 @@ class JamHypotheses:
         the band then explains the torque, and a band evaluated at a small updated load would
         claim the load known."""
         predicted, jacobian, variance = linearised
-        x_prior, p_prior = kf.x_prior.copy(), kf.P_prior.copy()
         for iteration in range(MAX_ITERATIONS + 1):
-            if iteration:
-                kf.x, kf.P = x_prior.copy(), p_prior.copy()
-            kf.update(
-                z,
-                HJacobian=_constant(jacobian[None, :]),
-                Hx=_constant(np.array([predicted])),
-                R=np.array([[variance]]),
-            )
+            _update_prior(kf, z, (predicted, jacobian, variance))
             if iteration == MAX_ITERATIONS:
                 return
             at_result, _, _, noise = self._measurement(kf.x, block, h.count, h.fresh, polar)
@@ -769,6 +754,19 @@ def _load_distance2(a: Hypothesis, b: Hypothesis) -> float:
     """Squared difference of two hypotheses' loads over the sum of their load variances."""
     difference = float(a.filter.x[LOAD] - b.filter.x[LOAD])
     return difference**2 / float(a.filter.P[LOAD, LOAD] + b.filter.P[LOAD, LOAD])
+
+
+def _update_prior(kf: Filter, z: FloatArray, linearised: tuple[float, FloatArray, float]) -> None:
+    """One EKF update of the predicted state (filterpy's x_prior, P_prior, which an update
+    leaves as they are) by the measurement linearised as (prediction, Jacobian, variance)."""
+    predicted, jacobian, variance = linearised
+    kf.x, kf.P = kf.x_prior.copy(), kf.P_prior.copy()
+    kf.update(
+        z,
+        HJacobian=_constant(jacobian[None, :]),
+        Hx=_constant(np.array([predicted])),
+        R=np.array([[variance]]),
+    )
 
 
 def _constant(value: FloatArray) -> Any:
