@@ -60,6 +60,7 @@ repair of the covariances (symmetrised, variance floors, positive definite).
 from __future__ import annotations
 
 import math
+from collections.abc import Callable
 from dataclasses import dataclass
 from typing import Any
 
@@ -104,7 +105,7 @@ LARGE_UPDATE_RATIO = 0.02
 ITERATION_SIGMAS = 3.0
 MAX_ITERATIONS = 3
 #: A standstill update is repeated with its noise evaluated at the updated load until the
-#: noise changes by less than this fraction (JamHypotheses._standstill_update).
+#: noise changes by less than this fraction (_standstill_update).
 BAND_VARIANCE_TOLERANCE = 0.1
 
 
@@ -569,7 +570,9 @@ class JamHypotheses:
         prediction h(x_i) + H_i (x_prior - x_i), at most MAX_ITERATIONS times.
         """
         if block.direction == 0:
-            self._standstill_update(kf, z, block, h, linearised, polar)
+            _standstill_update(
+                kf, z, linearised, lambda x: self._measurement(x, block, h.count, h.fresh, polar)
+            )
             return
         x_prior = kf.x_prior  # filterpy's copy of the predicted state (P_prior likewise)
         predicted, jacobian, variance = linearised
@@ -582,37 +585,6 @@ class JamHypotheses:
             if (float(z[0]) - mean) ** 2 <= ITERATION_SIGMAS**2 * variance:
                 return
             predicted = mean + float(jacobian @ (x_prior - kf.x))
-
-    def _standstill_update(
-        self,
-        kf: Filter,
-        z: FloatArray,
-        block: Block,
-        h: Hypothesis,
-        linearised: tuple[float, FloatArray, float],
-        polar: PolarPhasor | None,
-    ) -> None:
-        """EKF update of a standstill block, iterated on its noise: the stiction band's share
-        M_static(|F|)^2 / 3 (measurement.py) grows with the load. Evaluated at the predicted
-        load, which after a stroke's end can be kN off with a standard deviation of tens of kN,
-        it made a held torque look uninformative (a load held at zero read 0.1 +- 16 kN,
-        errors up to 40 kN at standstill with two jammed rollers). So the noise is evaluated
-        again at the updated load and the update repeated, until the noise changes by less
-        than BAND_VARIANCE_TOLERANCE (at most MAX_ITERATIONS times; the measurement is linear
-        in the load at standstill, its mean and Jacobian stay). Not where the count
-        self-locks the screw at the updated load (Prediction.self_locking): any load held by
-        the band then explains the torque, and a band evaluated at a small updated load would
-        claim the load known."""
-        predicted, jacobian, variance = linearised
-        for iteration in range(MAX_ITERATIONS + 1):
-            _update_prior(kf, z, (predicted, jacobian, variance))
-            if iteration == MAX_ITERATIONS:
-                return
-            at_result, _, _, noise = self._measurement(kf.x, block, h.count, h.fresh, polar)
-            settled = abs(noise - variance) <= BAND_VARIANCE_TOLERANCE * variance
-            if at_result.self_locking or settled:
-                return
-            variance = noise
 
     def _measurement(
         self,
@@ -754,6 +726,36 @@ def _load_distance2(a: Hypothesis, b: Hypothesis) -> float:
     """Squared difference of two hypotheses' loads over the sum of their load variances."""
     difference = float(a.filter.x[LOAD] - b.filter.x[LOAD])
     return difference**2 / float(a.filter.P[LOAD, LOAD] + b.filter.P[LOAD, LOAD])
+
+
+def _standstill_update(
+    kf: Filter,
+    z: FloatArray,
+    linearised: tuple[float, FloatArray, float],
+    measure: Callable[[FloatArray], tuple[Prediction, float, FloatArray, float]],
+) -> None:
+    """EKF update of a standstill block, iterated on its noise: the stiction band's share
+    M_static(|F|)^2 / 3 (measurement.py) grows with the load. Evaluated at the predicted
+    load, which after a stroke's end can be kN off with a standard deviation of tens of kN,
+    it made a held torque look uninformative (a load held at zero read 0.1 +- 16 kN,
+    errors up to 40 kN at standstill with two jammed rollers). So the noise is evaluated
+    again at the updated load and the update repeated, until the noise changes by less
+    than BAND_VARIANCE_TOLERANCE (at most MAX_ITERATIONS times; the measurement is linear
+    in the load at standstill, its mean and Jacobian stay). Not where the count
+    self-locks the screw at the updated load (Prediction.self_locking): any load held by
+    the band then explains the torque, and a band evaluated at a small updated load would
+    claim the load known. ``measure``: the hypothesis' measurement at a state
+    (JamHypotheses._measurement)."""
+    predicted, jacobian, variance = linearised
+    for iteration in range(MAX_ITERATIONS + 1):
+        _update_prior(kf, z, (predicted, jacobian, variance))
+        if iteration == MAX_ITERATIONS:
+            return
+        at_result, _, _, noise = measure(kf.x)
+        settled = abs(noise - variance) <= BAND_VARIANCE_TOLERANCE * variance
+        if at_result.self_locking or settled:
+            return
+        variance = noise
 
 
 def _update_prior(kf: Filter, z: FloatArray, linearised: tuple[float, FloatArray, float]) -> None:
