@@ -109,7 +109,8 @@ class InputHealth:
     start. rejected: samples rejected since start, by reason (the estimator's reasons in lower
     case, plus the caller's own, e.g. ``joint_missing``). recent_rejected_fraction: share of
     the samples judged over the last second that were rejected; recent_rejected: those, by
-    reason. topic: the input topic (empty if unknown), named while no input came.
+    reason. topic: the input topic (empty if unknown): the stale message names it while no
+    input came (a wrong input_topic shows there).
     """
 
     rate_hz: float
@@ -324,8 +325,7 @@ def _inputs(inputs: InputHealth, th: DiagnosticThresholds, now_s: float) -> _Par
         "recent_rejected_fraction": inputs.recent_rejected_fraction,
     }
     values.update({f"rejected_{reason}": count for reason, count in inputs.rejected.items()})
-    named = [("input_topic", inputs.topic)] if inputs.topic else []
-    return (Level.WARN if problems else Level.OK), message, [*_numbers(values), *named]
+    return (Level.WARN if problems else Level.OK), message, _numbers(values)
 
 
 def _recent(at_s: float | None, now_s: float) -> bool:
