@@ -29,11 +29,11 @@ Definitions:
   fraction of estimates whose truth lies within +-2 std.
 
 Estimates are stamped with the sensor's clock. When that clock jumps back (an estimate with
-event TIME_RESET) or its stamps skip ahead (estimates further apart than SKIP_S: a clock that
-jumped ahead, or missing data), the estimates after it are put back on the truth's
-time line by the offset that best matches their screw speed to the truth's (searched within
-+-MAX_CLOCK_OFFSET_S; after a skip the offset before it is kept unless another matches
-clearly better); the offsets found are reported, one per jump or skip.
+event TIME_RESET) or its stamps skip ahead (estimates further apart than SKIP_SPACINGS times
+their usual spacing: a clock that jumped ahead, or missing data), the estimates after it are
+put back on the truth's time line by the offset that best matches their screw speed to the
+truth's (searched within +-MAX_CLOCK_OFFSET_S; after a skip the offset before it is kept
+unless another matches clearly better); the offsets found are reported, one per jump or skip.
 """
 
 from __future__ import annotations
@@ -57,16 +57,19 @@ MOVING_FRACTION = 0.01
 NEES_MIN_LOAD_FRACTION = 0.05
 #: Largest sensor-clock jump that the alignment after a TIME_RESET or a skip searches for [s].
 MAX_CLOCK_OFFSET_S = 10.0
-#: Consecutive estimates in motion further apart than this [s] (a few blocks) are a skip: the
-#: sensor clock jumped ahead, or data are missing. Shorter skips are not searched, and
-#: misalign the estimates after them by at most this.
-SKIP_S = 0.1
-#: The same when either estimate is a standstill one (merged blocks of up to
-#: ``fidelity.standstill_block_s``, 0.5 s by default, apart).
-SKIP_STANDSTILL_S = 1.0
-#: After a skip, another offset than the one before it (at least SKIP_S / 2 from it) must
-#: match the screw speed this many times better (mean squared difference) to be taken.
+#: Consecutive estimates further apart than this many times their usual spacing (the median
+#: over the run, apart for those in motion and those beside a standstill estimate, which may
+#: stand for merged blocks) are a skip: the sensor clock jumped ahead, or data are missing.
+#: Shorter skips are not searched, and misalign the estimates after them by at most this.
+SKIP_SPACINGS = 2.5
+#: After a skip, another offset than the one before it (at least one usual spacing in motion
+#: from it) must match the screw speed this many times better (mean squared difference), over
+#: a time line of at least MIN_LINE_S, to be taken: a short line matches too many offsets.
 SKIP_MATCH_GAIN = 2.0
+MIN_LINE_S = 2.0
+#: The offset search matches at most this many estimates from the start of a time line (its
+#: candidates times these estimates are held at once: an hour's line would take gigabytes).
+MATCHED_ESTIMATES = 1000
 
 
 @dataclass(frozen=True)
@@ -191,17 +194,19 @@ def score(
 
 def _clock_offsets(states: list[HealthState], truth: TruthSamples) -> tuple[float, ...]:
     """The offset of each time line (:func:`_time_lines`) that best matches its estimates'
-    screw speed to the truth's: after a TIME_RESET searched within +-MAX_CLOCK_OFFSET_S of
-    zero; after a skip, around the offset of the line before it, which is kept unless one at
-    least SKIP_S / 2 from it matches the speed SKIP_MATCH_GAIN times better (a gap in the
-    data, or a standstill where every offset matches alike, keeps it)."""
+    screw speed to the truth's (its first MATCHED_ESTIMATES): after a TIME_RESET searched
+    within +-MAX_CLOCK_OFFSET_S of zero; after a skip, around the offset of the line before
+    it, which is kept unless the rules of SKIP_MATCH_GAIN take another (a gap in the data, or
+    a standstill where every offset matches alike, keeps it)."""
     stamps = np.array([s.stamp_s for s in states])
     speed = np.array([s.screw_speed_rad_s for s in states])
+    moving_spacing, _ = _spacings(states)
 
     def mismatch(segment: slice, candidates: FloatArray) -> FloatArray:
-        shifted = stamps[segment][None, :] + candidates[:, None]
+        matched = slice(segment.start, min(segment.stop, segment.start + MATCHED_ESTIMATES))
+        shifted = stamps[matched][None, :] + candidates[:, None]
         truth_speed = np.interp(shifted, truth.stamp_s, truth.screw_speed_rad_s)
-        return np.asarray(np.mean((truth_speed - speed[segment][None, :]) ** 2, axis=1))
+        return np.asarray(np.mean((truth_speed - speed[matched][None, :]) ** 2, axis=1))
 
     offsets: list[float] = []
     for segment in _time_lines(states):
@@ -215,8 +220,9 @@ def _clock_offsets(states: list[HealthState], truth: TruthSamples) -> tuple[floa
             best = float(candidates[int(np.argmin(mismatch(segment, candidates)))])  # ties: nearest
         if not reset:
             kept, found = mismatch(segment, np.array([before, best]))
-            jumped = abs(best - before) >= SKIP_S / 2 and found * SKIP_MATCH_GAIN < kept
-            best = best if jumped else before
+            long_enough = stamps[segment.stop - 1] - stamps[segment.start] >= MIN_LINE_S
+            jumped = abs(best - before) >= moving_spacing and found * SKIP_MATCH_GAIN < kept
+            best = best if jumped and long_enough else before
         offsets.append(best)
     return tuple(offsets)
 
@@ -236,15 +242,28 @@ def on_truth_clock(states: list[HealthState], offsets_s: tuple[float, ...]) -> F
     return stamps
 
 
-def _time_lines(states: list[HealthState]) -> list[slice]:
-    """The estimates from each sensor clock jump to the next (or the end): a TIME_RESET, or a
-    skip, where the stamps advance by more than SKIP_S from one estimate in motion to the next
-    (SKIP_STANDSTILL_S if either is a standstill estimate, which may stand for merged blocks):
-    a clock that jumped ahead, or a gap in the data (:func:`_clock_offsets` tells them apart).
-    The estimates before the first keep their stamps."""
+def _spacings(states: list[HealthState]) -> tuple[float, float]:
+    """The usual spacing [s] of consecutive estimates in motion, and of those beside a
+    standstill estimate (medians over the run; the block duration where there are none)."""
     stamps = np.array([s.stamp_s for s in states])
     still = np.array([s.event == EstimateEvent.STANDSTILL for s in states], dtype=bool)
-    longest = np.where(still[1:] | still[:-1], SKIP_STANDSTILL_S, SKIP_S)
+    steps = np.diff(stamps)
+    beside = still[1:] | still[:-1]
+    forward = steps > 0.0  # not across a time reset
+    moving = float(np.median(steps[~beside & forward])) if np.any(~beside & forward) else 0.0
+    resting = float(np.median(steps[beside & forward])) if np.any(beside & forward) else 0.0
+    return moving or resting, max(resting, moving)
+
+
+def _time_lines(states: list[HealthState]) -> list[slice]:
+    """The estimates from each sensor clock jump to the next (or the end): a TIME_RESET, or a
+    skip, where the stamps advance by more than SKIP_SPACINGS of their usual spacing
+    (:func:`_spacings`): a clock that jumped ahead, or a gap in the data (:func:`_clock_offsets`
+    tells them apart). The estimates before the first keep their stamps."""
+    stamps = np.array([s.stamp_s for s in states])
+    still = np.array([s.event == EstimateEvent.STANDSTILL for s in states], dtype=bool)
+    moving, resting = _spacings(states)
+    longest = SKIP_SPACINGS * np.where(still[1:] | still[:-1], resting, moving)
     skipped = np.r_[False, np.diff(stamps) > longest]
     starts = [i for i, s in enumerate(states) if s.event == EstimateEvent.TIME_RESET or skipped[i]]
     return [slice(b, e) for b, e in zip(starts, [*starts[1:], len(states)], strict=False)]
