@@ -312,11 +312,25 @@ class HealthEstimator:
         mean NIS (0 while its window is empty) as they are now; the stamp, load, friction,
         efficiency and speed of the last estimated block, which no later sample has changed;
         event NONE (no new block). Before the first estimate (also after a restore) the same
-        of ``saved``, an estimate saved with a restored state (the node keeps one), or None."""
-        last = self._last if self._last is not None else saved
-        if last is None:
+        of ``saved``, an estimate saved with a restored state (the node keeps one), with the
+        load and its standard deviation the filters' now (after a restore under other
+        parameters they start afresh: the saved load no longer holds), or None."""
+        if self._last is not None:
+            return dataclasses.replace(
+                self._last, event=EstimateEvent.NONE, **self._standing_fields()
+            )
+        if saved is None:
             return None
-        return dataclasses.replace(last, event=EstimateEvent.NONE, **self._standing_fields())
+        weights = [math.exp(h.log_prob) for h in self._bank.hypotheses]  # normalised
+        loads, variances = self._load_moments()
+        load, load_var = _mixed(weights, loads, variances)
+        return dataclasses.replace(
+            saved,
+            axial_load_n=load,
+            axial_load_std_n=math.sqrt(load_var),
+            event=EstimateEvent.NONE,
+            **self._standing_fields(),
+        )
 
     def process(self, samples: MotorSamples) -> list[HealthState]:
         """Feed samples (any number); returns the estimates of the blocks they complete."""
@@ -459,10 +473,7 @@ class HealthEstimator:
     ) -> HealthState:
         """The estimate of ``block``: the hypotheses' loads and load variances
         (:meth:`_load_moments`) mixed with their ``weights``."""
-        load = sum(w * f for w, f in zip(weights, loads, strict=True))
-        load_var = sum(
-            w * (v + (f - load) ** 2) for w, f, v in zip(weights, loads, variances, strict=True)
-        )
+        load, load_var = _mixed(weights, loads, variances)
         friction = sum(
             w * p.friction_torque_nm for w, p in zip(weights, step.predictions, strict=True)
         )
@@ -507,6 +518,15 @@ class HealthEstimator:
             "samples_rejected": counters.rejected_total,
             "nis": nis if math.isfinite(nis) else 0.0,
         }
+
+
+def _mixed(weights: list[float], loads: list[float], variances: list[float]) -> tuple[float, float]:
+    """Mean and variance of the hypotheses' load mixture (law of total variance)."""
+    load = sum(w * f for w, f in zip(weights, loads, strict=True))
+    load_var = sum(
+        w * (v + (f - load) ** 2) for w, f, v in zip(weights, loads, variances, strict=True)
+    )
+    return load, load_var
 
 
 def _radial_sensitivity(params: EstimatorParams) -> float:

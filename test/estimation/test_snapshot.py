@@ -207,3 +207,22 @@ def test_a_load_that_moved_while_the_node_was_down_is_not_taken_for_a_jam() -> N
     for states in (first.process(later), resumed.process(later)):
         assert max(1.0 - s.jam_probabilities[0] for s in states) < 1e-6
         assert states[-1].axial_load_n == pytest.approx(1.5 * 25_000.0, rel=0.1)
+
+
+def test_the_saved_estimate_brought_up_to_now_takes_the_filters_load() -> None:
+    """After a restore under another torque constant a maintenance reset published the saved
+    estimate's load (25,015 +- 59 N) while the filters had started afresh (0 +- 55 kN)."""
+    first = HealthEstimator(params())
+    saved_estimate = first.process(moving(3.0))[-1]
+    saved = json.loads(json.dumps(first.snapshot()))
+    whole = HealthEstimator(params())
+    assert whole.restore(saved) is True
+    now = whole.current_state(saved_estimate)
+    assert now is not None and now.axial_load_n == pytest.approx(saved_estimate.axial_load_n)
+    assert now.axial_load_std_n == pytest.approx(saved_estimate.axial_load_std_n)
+    partial = HealthEstimator(_changed(params(), "drive train"))
+    assert partial.restore(saved) is False
+    afresh = partial.current_state(saved_estimate)
+    assert afresh is not None and afresh.axial_load_n == 0.0
+    assert afresh.axial_load_std_n > 50e3 > 100.0 * saved_estimate.axial_load_std_n
+    assert afresh.precision_loss_m == saved_estimate.precision_loss_m  # the screw's, kept
