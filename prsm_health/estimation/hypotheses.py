@@ -745,17 +745,19 @@ def _standstill_update(
     self-locks the screw at the updated load (Prediction.self_locking): any load held by
     the band then explains the torque, and a band evaluated at a small updated load would
     claim the load known. ``measure``: the hypothesis' measurement at a state
-    (JamHypotheses._measurement)."""
+    (JamHypotheses._measurement). The innovation and its variance (kf.y, kf.S: the NIS of the
+    gate and the divergence test) stay the first update's, with the noise as predicted: an
+    iteration changes the estimate, not how surprising the block was."""
     predicted, jacobian, variance = linearised
-    for iteration in range(MAX_ITERATIONS + 1):
-        _update_prior(kf, z, (predicted, jacobian, variance))
-        if iteration == MAX_ITERATIONS:
-            return
+    _update_prior(kf, z, linearised)
+    innovation = kf.y.copy(), kf.S.copy()
+    for _ in range(MAX_ITERATIONS):
         at_result, _, _, noise = measure(kf.x)
-        settled = abs(noise - variance) <= BAND_VARIANCE_TOLERANCE * variance
-        if at_result.self_locking or settled:
-            return
+        if at_result.self_locking or abs(noise - variance) <= BAND_VARIANCE_TOLERANCE * variance:
+            break
         variance = noise
+        _update_prior(kf, z, (predicted, jacobian, variance))
+    kf.y, kf.S = innovation
 
 
 def _update_prior(kf: Filter, z: FloatArray, linearised: tuple[float, FloatArray, float]) -> None:

@@ -453,3 +453,23 @@ def test_an_assumed_onset_is_a_birth_that_keeps_the_ripple_learnt() -> None:
         bank.assume_onset(2)
     with pytest.raises(ValueError, match=r"within 3\.\.10"):
         bank.assume_onset(11)
+
+
+def test_a_standstill_update_keeps_the_nis_of_its_predicted_noise() -> None:
+    """The standstill update is repeated with the stiction band at the updated load; its NIS
+    (the gate's and the divergence test's) was the last repetition's, with a smaller band:
+    blocks that passed the gate could fail it (35.8 became 99.9 in one case found)."""
+    p = dataclasses.replace(params(prune_hypotheses=True), model=ModelParams(jam_rate_per_h=0.0))
+    model = TorqueModel(p)
+    bank = JamHypotheses(p, model)
+    bank.reset_count(1)
+    (h,) = bank.hypotheses
+    h.filter.x[LOAD], h.filter.P[LOAD, LOAD] = 10e3, 2e3**2
+    still = Block(0.0, 0.04, 40, 0.0, 0.0, 0.0, 1.0, 0.0, direction=0)
+    held = model.predict(np.r_[-10e3, np.zeros(model.dim - 1)], still, 1).motor_torque_nm
+    block = dataclasses.replace(still, motor_torque_nm=held)
+    step = bank.step(block, jerk_psd=5e11, evidence=False)
+    prior = model.predict(h.filter.x_prior, block, 1)
+    spread = float(prior.jacobian @ h.filter.P_prior @ prior.jacobian) + prior.variance_nm2
+    assert step.nis[0] == pytest.approx((held - prior.motor_torque_nm) ** 2 / spread)
+    assert not step.gated
