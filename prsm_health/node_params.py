@@ -17,24 +17,19 @@ from typing import Any
 import yaml
 
 from prsm_health.estimation.params import bundled_params_file, load_params_mapping
-from prsm_health.scenes.recording import SceneActuator, bag_actuator, usable_bag_actuator
+from prsm_health.scenes.recording import SceneActuator, bag_actuator
 from prsm_health.yamlio import YamlError
 
 
-def params_for_bag(bag: Path, base: Path) -> tuple[dict[str, Any], SceneActuator] | None:
-    """The parameters of ``base`` with the actuator ``bag`` was simulated with, and that
-    actuator; None if the bag records none (then ``base`` holds as it is).
+def params_with_actuator(base: Path, scene: SceneActuator) -> dict[str, Any]:
+    """The parameters of ``base`` with the actuator of ``scene`` instead of theirs.
 
     Raises:
-        BagError: the bag cannot be opened.
         YamlError: ``base`` cannot be read.
     """
-    scene = usable_bag_actuator(bag, base)
-    if scene is None:
-        return None
     params = load_params_mapping(base)
     params["actuator"] = scene.section
-    return params, scene
+    return params
 
 
 def accelerated_wear_note(bag: Path) -> str | None:
@@ -74,16 +69,16 @@ def _run_node_params(args: argparse.Namespace) -> int:
     base = args.params or bundled_params_file()
     if args.out.exists():
         raise ValueError(f"--out: {args.out} exists")
-    try:
-        found = params_for_bag(args.bag, base)
-    except YamlError as exc:
-        raise ValueError(f"--params: {exc}") from exc
-    if found is None:
+    scene = bag_actuator(args.bag)  # a record that builds no actuator: its error, as it is
+    if scene is None:
         raise ValueError(
             f"{args.bag} records no actuator (not made by prsm-health simulate, nor named "
             f"after a bundled scene): the node's params_file is {base} or one of yours"
         )
-    params, scene = found
+    try:
+        params = params_with_actuator(base, scene)
+    except YamlError as exc:
+        raise ValueError(f"--params: {exc}") from exc
     try:
         args.out.write_text(yaml.safe_dump(params, sort_keys=False), encoding="utf-8")
     except OSError as exc:

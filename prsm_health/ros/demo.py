@@ -35,9 +35,10 @@ from rosbags.rosbag2 import Reader, ReaderError
 from prsm_health.bags.errors import BagError
 from prsm_health.bags.reader import read_truth
 from prsm_health.estimation.params import bundled_params_file
-from prsm_health.node_params import params_for_bag
+from prsm_health.node_params import params_with_actuator
 from prsm_health.ros.monitor import Monitor, MonitorOptions
 from prsm_health.ros.runtime import loopback_env, ros_session
+from prsm_health.scenes.recording import usable_bag_actuator
 
 DEMO_DOMAIN_ID = 42
 #: What the demo plays of the bag (the node's default input).
@@ -71,10 +72,10 @@ def bag_duration_s(bag: Path) -> float:
 
 def demo_params(bag: Path, workdir: Path) -> tuple[Path, str]:
     """The node's params file for ``bag`` (module docstring) and a line saying what it is."""
-    found = params_for_bag(bag, bundled_params_file())
-    if found is None:
+    scene = usable_bag_actuator(bag, bundled_params_file())
+    if scene is None:
         return bundled_params_file(), f"params {bundled_params_file()}"
-    params, scene = found
+    params = params_with_actuator(bundled_params_file(), scene)
     path = workdir / "params.yaml"
     path.write_text(yaml.safe_dump(params, sort_keys=False))
     acceleration = scene.actuator.wear_acceleration

@@ -220,3 +220,15 @@ def test_a_bag_without_a_record_gets_no_node_params_and_no_play_note(
     out = tmp_path / "node.yaml"
     assert main(["node-params", str(unrecorded), "--out", str(out)]) == 2
     assert "records no actuator" in capsys.readouterr().err and not out.exists()
+
+
+def test_node_params_names_a_record_that_builds_no_actuator(
+    renamed: Path, tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    """It warned that the default actuator was used, then said the bag recorded none."""
+    bag = copy_recording(renamed, tmp_path / "bag", "preset: /gone/p.yaml\n")
+    out = tmp_path / "node.yaml"
+    assert main(["node-params", str(bag), "--out", str(out)]) == 2
+    err = capsys.readouterr().err
+    assert err.startswith(f"prsm-health: error: {bag}: custom_data {ACTUATOR_KEY}: preset: ")
+    assert err.count("\n") == 1 and not out.exists()
