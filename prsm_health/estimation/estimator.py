@@ -189,13 +189,15 @@ class HealthEstimator:
             if snapshot["format"] != SNAPSHOT_FORMAT:
                 raise SnapshotError(f"format {snapshot['format']!r}, expected {SNAPSHOT_FORMAT}")
             whole = bool(snapshot["actuator"] == actuator_fingerprint(self.params))
+            # Said once the rest is known sound: a damaged file is no other actuator's.
+            foreign = None
             if not whole and "screw" not in snapshot:  # saved before the screw's own digest
-                raise ForeignStateError(
+                foreign = (
                     "the state belongs to another actuator (the preset or the drive train "
                     "differ; the state does not say which): refusing to resume from it"
                 )
-            if not whole and snapshot["screw"] != screw_fingerprint(self.params):
-                raise ForeignStateError(
+            elif not whole and snapshot["screw"] != screw_fingerprint(self.params):
+                foreign = (
                     "the state belongs to another screw (the preset's geometry, materials, "
                     "friction, wear or fatigue differ): refusing to resume from it"
                 )
@@ -220,7 +222,7 @@ class HealthEstimator:
                     and np.all(np.abs(p) < SNAPSHOT_LARGEST_VALUE)
                 )
                 valid = (
-                    0 <= k <= self._bank.n_rollers
+                    0 <= k <= (self._bank.n_rollers if foreign is None else k)  # its rollers
                     and (filter_state_ok or not whole)
                     and (saved is None or -math.inf < log_probability <= 0.0)
                 )
@@ -249,6 +251,8 @@ class HealthEstimator:
                 f"sample counters: {len(self.counters.rejected)} rejection reasons expected, "
                 f"each count in [0, 2^62), got {len(rejected)} reasons, counts {counts}"
             )
+        if foreign is not None:
+            raise ForeignStateError(foreign)
         if whole:
             self._bank.restore(states)
         else:

@@ -11,7 +11,7 @@ import numpy as np
 import pytest
 
 from prsm_health.actuator import Actuator
-from prsm_health.estimation.estimator import HealthEstimator, SnapshotError
+from prsm_health.estimation.estimator import ForeignStateError, HealthEstimator, SnapshotError
 from prsm_health.estimation.params import EstimatorParams, Fidelity
 from prsm_health.physics.presets import load_preset
 from prsm_health.signals import MotorSamples
@@ -57,11 +57,17 @@ def test_the_ripple_axes_survive_a_restart() -> None:
     assert all(h.ripple_axis is None for h in resumed._bank.hypotheses)
 
 
-def test_a_state_of_another_screw_is_refused() -> None:
+def test_a_state_of_another_screw_is_refused_as_foreign_unless_damaged() -> None:
     saved = HealthEstimator(params()).snapshot()
     # Said as it is (it read "malformed state: SnapshotError('the state belongs to ...')").
-    with pytest.raises(SnapshotError, match=r"^the state belongs to another screw"):
+    with pytest.raises(ForeignStateError, match=r"^the state belongs to another screw"):
         HealthEstimator(params("li2020-jamming")).restore(saved)
+    # A damaged one is damaged, whoever's it was (it was called foreign, "resumes once moved
+    # back", which it never would).
+    saved["degradation"]["precision_loss_m"] = -1.0
+    with pytest.raises(SnapshotError, match="degradation values") as info:
+        HealthEstimator(params("li2020-jamming")).restore(saved)
+    assert not isinstance(info.value, ForeignStateError)
 
 
 def test_a_state_saved_before_the_screw_fingerprint_still_resumes() -> None:
@@ -73,6 +79,7 @@ def test_a_state_saved_before_the_screw_fingerprint_still_resumes() -> None:
     old += (actuator.drive_train, actuator.misalignment, base.radial_terms)
     saved = HealthEstimator(base).snapshot()
     assert saved["actuator"] == hashlib.sha256(repr(old).encode()).hexdigest()[:16]
+    assert saved["actuator"] == "cef0f10e4fa49d5a"  # what the code of 85945b2 saved for it
     del saved["screw"]
     assert HealthEstimator(base).restore(saved) is True
     with pytest.raises(SnapshotError, match=r"^the state belongs to another actuator \(the pre"):
