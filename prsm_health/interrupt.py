@@ -50,10 +50,10 @@ def removed_on_abort(output: Path | None) -> Iterator[None]:
     try:
         yield
     except KeyboardInterrupt:
-        if output is not None and output.is_dir() and not output.is_symlink():
-            shutil.rmtree(output, ignore_errors=True)
-        elif output is not None:
-            output.unlink(missing_ok=True)
-        if output is not None:
+        if output is not None and (output.exists() or output.is_symlink()):
+            if output.is_dir() and not output.is_symlink():
+                shutil.rmtree(output, ignore_errors=True)
+            else:
+                output.unlink(missing_ok=True)
             print(f"removed the incomplete {output}", file=sys.stderr)
         raise

@@ -160,7 +160,9 @@ def _load_figure(series: _Series, truth: TruthSamples | None, *, xlabel: str, ti
     shown = series.load_kn
     if truth is not None:
         _truth(axis, truth.stamp_s, truth.axial_load_n / 1e3)
-        shown = np.concatenate([shown, truth.axial_load_n / 1e3])
+        # The truth over the estimates' span only (a replay stopped early: its axis).
+        during = (truth.stamp_s >= np.nanmin(t)) & (truth.stamp_s <= np.nanmax(t))
+        shown = np.concatenate([shown, truth.axial_load_n[during] / 1e3])
     shown = shown[np.isfinite(shown)]
     if shown.size:  # the loads set the axis, not the band
         low, high = float(shown.min()), float(shown.max())

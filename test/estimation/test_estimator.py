@@ -182,7 +182,8 @@ def test_the_load_at_standstill_is_held_to_its_band_at_the_updated_load() -> Non
 def test_three_jammed_rollers_self_lock_the_screw_at_standstill() -> None:
     """Their sliding torque grows faster with the load than the load torque (docs/estimation.md):
     any held load explains a held torque, and the standstill update does not narrow the band
-    at a small updated load."""
+    at a small updated load (without that guard the standstill estimates of three jammed
+    rollers claimed their load to 40 N)."""
     model = TorqueModel(DEFAULT)
     still = Block(0.0, 0.5, 500, 0.0, 0.0, 0.0, 1.0, 0.0, direction=0)
     moving = dataclasses.replace(still, motor_speed_rad_s=150.0, direction=1)
@@ -191,6 +192,14 @@ def test_three_jammed_rollers_self_lock_the_screw_at_standstill() -> None:
         locked = [model.predict(x, still, jammed).self_locking for jammed in range(4)]
         assert locked == [False, False, False, True]
         assert not model.predict(x, moving, 3).self_locking
+    three = [{"time_s": 2.0, "roller": 2}, {"time_s": 3.0, "roller": 7}]
+    states, _, _ = run(downhole(jams=[*three, {"time_s": 3.5, "roller": 4}]))
+    locked = [
+        s.axial_load_std_n
+        for s in states
+        if s.event == EstimateEvent.STANDSTILL and s.jammed_rollers_most_likely == 3
+    ]
+    assert len(locked) > 5 and max(locked) > 1e3
 
 
 def test_a_jam_at_standstill_survives_a_slow_stroke() -> None:
