@@ -454,6 +454,12 @@ class HealthNode(LifecycleNode):
             if sample.problem:
                 self._node_rejects[sample.problem] += 1
                 self._pending.received += 1
+                self.get_logger().warning(
+                    f"JointState rejected ({sample.problem}): joint_name {config.joint_name!r},"
+                    f" the message has {list(msg.name)!r} with {len(msg.effort)} efforts,"
+                    f" {len(msg.velocity)} velocities, {len(msg.position)} positions",
+                    throttle_duration_sec=5.0,
+                )
                 return
             self._pending.add(
                 sample.stamp_s, sample.current_a, sample.speed_rad_s, sample.position_rad

@@ -160,6 +160,11 @@ def test_malformed_inputs_are_counted_not_published(ros: None, tmp_path: Path) -
                 values_ = value if isinstance(value, list) else [value]
                 assert all(math.isfinite(v) for v in values_), (hardware_id, key)
         assert estimates[-1]["axial_load_n"] == pytest.approx(LOAD_N, rel=0.1)
+    # The log names what was expected and what came (the count alone left the user guessing).
+    joint_log = next(node for node in nodes if node.name == "malformed_joint").log()
+    assert (
+        "JointState rejected (joint_missing): joint_name 'prsm_motor', the message has ['wheel']"
+    ) in joint_log
 
 
 @pytest.mark.timeout(90)
