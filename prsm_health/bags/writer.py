@@ -91,7 +91,7 @@ class BagWriter:
         if self.path.suffix == ".mcap":
             raise BagError(
                 self.path,
-                "a bag is written as a directory (metadata.yaml and <name>/<name>.mcap): give "
+                "a bag is written as a directory NAME holding metadata.yaml and NAME.mcap: give "
                 f"its name without .mcap, e.g. {self.path.with_suffix('')}",
             )
         try:

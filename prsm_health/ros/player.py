@@ -224,7 +224,7 @@ def open_bag(bag: Path, topics: Collection[str]) -> Iterator[BagSource]:
         raw = read_raw_messages(bag, topics)
     except BagError as unreadable:
         raise PlayInputError(
-            f"cannot open bag {bag}: {_one_line(rosbags_error)}; "
+            f"cannot open bag {bag}: {_one_line(rosbags_error).rstrip('.')}; "
             f"nor as a damaged MCAP bag: {_one_line(unreadable)}"
         ) from rosbags_error
     yield BagSource(raw.types, raw.counts(), lambda: raw, raw.damage, _one_line(rosbags_error))
