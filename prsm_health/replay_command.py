@@ -6,6 +6,7 @@ scene; else a simulated bag's own (recorded in it by ``prsm-health simulate``, o
 without that record the bundled scene it is named after:
 :func:`~prsm_health.scenes.recording.bag_actuator`), also over the ``--params`` file's (the
 scenes accelerate wear: the estimator must know by how much); else the parameters file's.
+A ``--params`` file without an ``actuator:`` section (settings only) takes the scene's.
 """
 
 from __future__ import annotations
@@ -113,17 +114,31 @@ def _params(args: argparse.Namespace) -> tuple[EstimatorParams, str, SceneActuat
         data = load_params_mapping(path)
     except YamlError as exc:
         raise ValueError(f"--params: {exc}") from exc
+    own_actuator = "actuator" in data
+    scene = None
+    if not own_actuator:  # a file of settings only: the scene's actuator completes it
+        scene = _scene_of(args, path)
+        if scene is not None:
+            data = {**data, "actuator": scene.section}
     try:
         params = params_from_mapping(data)
     except ValueError as exc:  # a bad value: say which file holds it
         raise ValueError(f"--params: {path}: {exc}") from exc
-    scene = scene_actuator(args.scene) if args.scene else usable_bag_actuator(args.bag, path)
+    if own_actuator:
+        scene = _scene_of(args, path)
     if scene is None:
         return params, str(path), None
     source = f"{path}, actuator of {scene.origin}"
-    if args.params is not None and not args.scene:
+    if not own_actuator:
+        source += " (the file has none)"
+    elif args.params is not None and not args.scene:
         source += " instead of the file's (--scene NAME|FILE to choose another)"
     return dataclasses.replace(params, actuator=scene.actuator), source, scene
+
+
+def _scene_of(args: argparse.Namespace, params_path: Path) -> SceneActuator | None:
+    """The actuator of --scene, else the one the bag records (module docstring)."""
+    return scene_actuator(args.scene) if args.scene else usable_bag_actuator(args.bag, params_path)
 
 
 def _check_outputs(args: argparse.Namespace) -> None:

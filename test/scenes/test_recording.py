@@ -41,6 +41,16 @@ def copy_recording(bag: Path, copy: Path, actuator_section: str) -> Path:
     return copy
 
 
+def without_record(bag: Path, copy: Path) -> Path:
+    """A copy of ``bag`` whose metadata.yaml records nothing (not named after a scene)."""
+    shutil.copytree(bag, copy)
+    meta = copy / "metadata.yaml"
+    info = yaml.safe_load(meta.read_text())
+    del info["rosbag2_bagfile_information"]["custom_data"]
+    meta.write_text(yaml.safe_dump(info))
+    return copy
+
+
 def test_the_bag_records_its_scene_and_actuator_section(renamed: Path) -> None:
     data = custom_data(renamed)
     assert data[SCENE_KEY] == "sudden-jam"
@@ -210,12 +220,7 @@ def test_a_bag_without_a_record_gets_no_node_params_and_no_play_note(
     note = accelerated_wear_note(renamed)
     assert note is not None and "accelerates wear x100000" in note
     assert f"prsm-health node-params {renamed} --out FILE" in note
-    unrecorded = tmp_path / "field-run"
-    shutil.copytree(renamed, unrecorded)
-    meta = unrecorded / "metadata.yaml"
-    info = yaml.safe_load(meta.read_text())
-    del info["rosbag2_bagfile_information"]["custom_data"]
-    meta.write_text(yaml.safe_dump(info))
+    unrecorded = without_record(renamed, tmp_path / "field-run")
     assert accelerated_wear_note(unrecorded) is None
     out = tmp_path / "node.yaml"
     assert main(["node-params", str(unrecorded), "--out", str(out)]) == 2
@@ -232,3 +237,20 @@ def test_node_params_names_a_record_that_builds_no_actuator(
     err = capsys.readouterr().err
     assert err.startswith(f"prsm-health: error: {bag}: custom_data {ACTUATOR_KEY}: preset: ")
     assert err.count("\n") == 1 and not out.exists()
+
+
+def test_replay_params_of_settings_only_take_the_bags_actuator(
+    renamed: Path, tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    """A tuning file without an actuator: section was refused ("actuator: missing") although
+    the bag's record gives the actuator."""
+    settings = tmp_path / "settings.yaml"
+    settings.write_text("noise: {model_error_rel: 0.002}\n")
+    assert main(["replay", str(renamed), "--params", str(settings)]) == 0
+    out = capsys.readouterr().out
+    assert (
+        f"parameters: {settings}, actuator of scene sudden-jam (recorded in the bag) (the " in out
+    )
+    unrecorded = without_record(renamed, tmp_path / "field-run")
+    assert main(["replay", str(unrecorded), "--params", str(settings)]) == 2
+    assert "actuator: missing" in capsys.readouterr().err
