@@ -421,8 +421,23 @@ def params_from_mapping(data: dict[str, Any]) -> EstimatorParams:
         )
     if "actuator" not in data:
         raise ParameterError("actuator", "missing (at least actuator.preset is required)")
-    sections = {name: build_dataclass(cls, data.get(name), name) for name, cls in _SECTIONS.items()}
-    return EstimatorParams(actuator=actuator_from_mapping(data["actuator"]), **sections)
+    # Each section is checked, so that one edit fixes every bad section (the first bad value
+    # of each is named; the sections' checks against each other follow).
+    problems: list[ParameterError] = []
+    sections: dict[str, Any] = {}
+    for name, cls in _SECTIONS.items():
+        try:
+            sections[name] = build_dataclass(cls, data.get(name), name)
+        except ParameterError as exc:
+            problems.append(exc)
+    try:
+        actuator = actuator_from_mapping(data["actuator"])
+    except ParameterError as exc:
+        problems.insert(0, exc)
+    if problems:
+        first, *more = problems
+        raise ParameterError(first.field, "; ".join([first.message, *map(str, more)]))
+    return EstimatorParams(actuator=actuator, **sections)
 
 
 def load_params_mapping(path: Path) -> dict[str, Any]:

@@ -338,3 +338,17 @@ def test_a_relative_preset_path_is_taken_from_the_params_files_folder(
     preset.unlink()
     with pytest.raises(ParameterError, match=re.escape(f"no such preset file '{preset.parent}")):
         load_params(tmp_path / "robot" / "params.yaml")
+
+
+def test_every_bad_section_is_named_at_once() -> None:
+    """Only the first bad section was named: one edit per run to find the next."""
+    document = {
+        "actuator": {"preset": "dong2022-downhole", "wear_acceleration": -1.0},
+        "filter": {"gate_nis": -1.0},
+        "noise": {"model_error_rel": -2.0},
+    }
+    with pytest.raises(ParameterError) as info:
+        params_from_mapping(document)
+    assert info.value.field == "actuator.wear_acceleration"
+    for named in ("actuator.wear_acceleration", "filter.gate_nis", "noise.model_error_rel"):
+        assert str(info.value).count(named) == 1
