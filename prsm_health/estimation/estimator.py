@@ -222,7 +222,8 @@ class HealthEstimator:
                     and np.all(np.abs(p) < SNAPSHOT_LARGEST_VALUE)
                 )
                 valid = (
-                    0 <= k <= (self._bank.n_rollers if foreign is None else k)  # its rollers
+                    k >= 0
+                    and (k <= self._bank.n_rollers or foreign is not None)  # another's rollers
                     and (filter_state_ok or not whole)
                     and (saved is None or -math.inf < log_probability <= 0.0)
                 )

@@ -577,7 +577,7 @@ class JamHypotheses:
         x_prior = kf.x_prior  # filterpy's copy of the predicted state (P_prior likewise)
         predicted, jacobian, variance = linearised
         for iteration in range(MAX_ITERATIONS + 1):
-            _update_prior(kf, z, (predicted, jacobian, variance))
+            _update_prior(kf, z, (predicted, jacobian, variance), again=iteration > 0)
             moved = abs(float(kf.x[LOAD] - x_prior[LOAD]))
             if iteration == MAX_ITERATIONS or moved <= self._large_update_n:
                 return
@@ -756,15 +756,20 @@ def _standstill_update(
         if at_result.self_locking or abs(noise - variance) <= BAND_VARIANCE_TOLERANCE * variance:
             break
         variance = noise
-        _update_prior(kf, z, (predicted, jacobian, variance))
+        _update_prior(kf, z, (predicted, jacobian, variance), again=True)
     kf.y, kf.S = innovation
 
 
-def _update_prior(kf: Filter, z: FloatArray, linearised: tuple[float, FloatArray, float]) -> None:
-    """One EKF update of the predicted state (filterpy's x_prior, P_prior, which an update
-    leaves as they are) by the measurement linearised as (prediction, Jacobian, variance)."""
+def _update_prior(
+    kf: Filter, z: FloatArray, linearised: tuple[float, FloatArray, float], *, again: bool = False
+) -> None:
+    """One EKF update of the predicted state by the measurement linearised as (prediction,
+    Jacobian, variance); ``again``: the filter holds an earlier update's result, so it is put
+    back to the prediction first (filterpy's x_prior, P_prior, which an update leaves as they
+    are; the first update starts there already, with no copy in the hot path)."""
     predicted, jacobian, variance = linearised
-    kf.x, kf.P = kf.x_prior.copy(), kf.P_prior.copy()
+    if again:
+        kf.x, kf.P = kf.x_prior.copy(), kf.P_prior.copy()
     kf.update(
         z,
         HJacobian=_constant(jacobian[None, :]),
