@@ -200,7 +200,7 @@ def _clock_offsets(states: list[HealthState], truth: TruthSamples) -> tuple[floa
     a standstill where every offset matches alike, keeps it)."""
     stamps = np.array([s.stamp_s for s in states])
     speed = np.array([s.screw_speed_rad_s for s in states])
-    moving_spacing, _ = _spacings(states)
+    lines, moving_spacing = _time_lines(states)
 
     def mismatch(segment: slice, candidates: FloatArray) -> FloatArray:
         matched = slice(segment.start, min(segment.stop, segment.start + MATCHED_ESTIMATES))
@@ -209,7 +209,7 @@ def _clock_offsets(states: list[HealthState], truth: TruthSamples) -> tuple[floa
         return np.asarray(np.mean((truth_speed - speed[matched][None, :]) ** 2, axis=1))
 
     offsets: list[float] = []
-    for segment in _time_lines(states):
+    for segment in lines:
         reset = states[segment.start].event == EstimateEvent.TIME_RESET
         before = 0.0 if reset or not offsets else offsets[-1]
         best = before
@@ -232,7 +232,7 @@ def on_truth_clock(states: list[HealthState], offsets_s: tuple[float, ...]) -> F
     the first (:func:`_time_lines`): the time line :func:`score` compares on
     (``Metrics.clock_offsets_s``)."""
     stamps = np.array([s.stamp_s for s in states])
-    segments = _time_lines(states)
+    segments, _ = _time_lines(states)
     if len(offsets_s) != len(segments):
         raise ValueError(
             f"on_truth_clock: {len(offsets_s)} offsets for {len(segments)} sensor clock jumps"
@@ -242,9 +242,16 @@ def on_truth_clock(states: list[HealthState], offsets_s: tuple[float, ...]) -> F
     return stamps
 
 
-def _spacings(states: list[HealthState]) -> tuple[float, float]:
-    """The usual spacing [s] of consecutive estimates in motion, and of those beside a
-    standstill estimate (medians over the run; the block duration where there are none)."""
+def _time_lines(states: list[HealthState]) -> tuple[list[slice], float]:
+    """The estimates from each sensor clock jump to the next (or the end): a TIME_RESET, or a
+    skip, where the stamps advance by more than SKIP_SPACINGS of their usual spacing: a clock
+    that jumped ahead, or a gap in the data (:func:`_clock_offsets` tells them apart). The
+    estimates before the first keep their stamps. Also the usual spacing in motion [s].
+
+    The usual spacings are medians over the run, of consecutive estimates in motion and of
+    those beside a standstill estimate (which may stand for merged blocks); one stands for
+    the other where a run has none of a kind.
+    """
     stamps = np.array([s.stamp_s for s in states])
     still = np.array([s.event == EstimateEvent.STANDSTILL for s in states], dtype=bool)
     steps = np.diff(stamps)
@@ -252,21 +259,11 @@ def _spacings(states: list[HealthState]) -> tuple[float, float]:
     forward = steps > 0.0  # not across a time reset
     moving = float(np.median(steps[~beside & forward])) if np.any(~beside & forward) else 0.0
     resting = float(np.median(steps[beside & forward])) if np.any(beside & forward) else 0.0
-    return moving or resting, max(resting, moving)
-
-
-def _time_lines(states: list[HealthState]) -> list[slice]:
-    """The estimates from each sensor clock jump to the next (or the end): a TIME_RESET, or a
-    skip, where the stamps advance by more than SKIP_SPACINGS of their usual spacing
-    (:func:`_spacings`): a clock that jumped ahead, or a gap in the data (:func:`_clock_offsets`
-    tells them apart). The estimates before the first keep their stamps."""
-    stamps = np.array([s.stamp_s for s in states])
-    still = np.array([s.event == EstimateEvent.STANDSTILL for s in states], dtype=bool)
-    moving, resting = _spacings(states)
-    longest = SKIP_SPACINGS * np.where(still[1:] | still[:-1], resting, moving)
-    skipped = np.r_[False, np.diff(stamps) > longest]
+    moving, resting = moving or resting, max(resting, moving)
+    skipped = np.r_[False, steps > SKIP_SPACINGS * np.where(beside, resting, moving)]
     starts = [i for i, s in enumerate(states) if s.event == EstimateEvent.TIME_RESET or skipped[i]]
-    return [slice(b, e) for b, e in zip(starts, [*starts[1:], len(states)], strict=False)]
+    lines = [slice(b, e) for b, e in zip(starts, [*starts[1:], len(states)], strict=False)]
+    return lines, moving
 
 
 def _nees_test(stamps: FloatArray, nees: FloatArray) -> tuple[float, tuple[float, float], bool]:
