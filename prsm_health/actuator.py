@@ -235,10 +235,17 @@ def preset_beside_file(data: dict[str, Any], path: Path) -> dict[str, Any]:
     section = data.get("actuator")
     if not isinstance(section, dict):
         return data
-    preset = section.get("preset")
+    relative = relative_preset_file(section.get("preset"))
+    if relative is None:
+        return data
+    return {**data, "actuator": {**section, "preset": str(path.parent / relative)}}
+
+
+def relative_preset_file(preset: object) -> Path | None:
+    """The path of a preset file named by a relative path in an ``actuator.preset`` value;
+    None for a bundled preset's name, an absolute path or anything else (which
+    :func:`actuator_from_mapping` judges)."""
     if not isinstance(preset, str) or preset in PRESET_NAMES:
-        return data
-    preset_path = Path(preset)
-    if preset_path.is_absolute() or preset_path.suffix not in (".yaml", ".yml"):
-        return data
-    return {**data, "actuator": {**section, "preset": str(path.parent / preset_path)}}
+        return None
+    path = Path(preset)
+    return path if not path.is_absolute() and path.suffix in (".yaml", ".yml") else None

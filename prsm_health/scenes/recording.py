@@ -25,11 +25,10 @@ from typing import Any, NamedTuple, cast
 import numpy as np
 import yaml
 
-from prsm_health.actuator import Actuator, actuator_from_mapping
+from prsm_health.actuator import Actuator, actuator_from_mapping, relative_preset_file
 from prsm_health.bags.bagfiles import custom_data
 from prsm_health.bags.writer import BagWriter, write_joint_states, write_motor_states, write_truth
 from prsm_health.physics.errors import ParameterError
-from prsm_health.physics.presets import PRESET_NAMES
 from prsm_health.scenes.scene import load_scene, scene_names
 from prsm_health.scenes.simulator import DEFAULT_CHUNK_SAMPLES, Simulator
 from prsm_health.scenes.validation import prefixed
@@ -80,12 +79,14 @@ def record(
 
 def _recorded_section(actuator_yaml: str) -> str:
     """The actuator section to record: a preset file named by a relative path made absolute
-    (it was found from the working directory of the simulation, not of a later replay)."""
+    (relative to the working directory of the simulation, not of a later replay; a scene
+    file's own relative path is already joined to its folder:
+    :func:`~prsm_health.actuator.preset_beside_file`)."""
     section = yaml.safe_load(actuator_yaml)
-    preset = str(section["preset"])
-    if preset in PRESET_NAMES:
+    relative = relative_preset_file(section["preset"])
+    if relative is None:
         return actuator_yaml
-    return yaml.safe_dump({**section, "preset": str(Path(preset).resolve())}, sort_keys=False)
+    return yaml.safe_dump({**section, "preset": str(relative.resolve())}, sort_keys=False)
 
 
 class SceneActuator(NamedTuple):
