@@ -16,6 +16,7 @@ Sign conventions (SI, motor side unless named ``screw``):
 from __future__ import annotations
 
 import math
+from collections.abc import Callable
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
@@ -27,8 +28,7 @@ from prsm_health.config import build_dataclass
 from prsm_health.physics.errors import ParameterError
 from prsm_health.physics.geometry import (
     Misalignment,
-    require,
-    require_finite_positive,
+    require_ranges,
     require_real,
 )
 from prsm_health.physics.load_distribution import LoadingCase
@@ -47,10 +47,6 @@ DRIVE_TRAIN_RANGES: dict[str, tuple[float, float]] = {
 }
 #: The accepted range of :attr:`Actuator.wear_acceleration`.
 WEAR_ACCELERATION_RANGE = (1e-3, 1e9)
-
-
-def _require_range(value: float, name: str, low: float, high: float) -> None:
-    require(low <= value <= high, name, f"must be in [{low:g}, {high:g}], got {value!r}")
 
 
 @dataclass(frozen=True, kw_only=True)
@@ -89,9 +85,7 @@ class DriveTrain:
     max_current_a: float = 60.0
 
     def __post_init__(self) -> None:
-        require_finite_positive(self, "actuator.drive_train")
-        for name, (low, high) in DRIVE_TRAIN_RANGES.items():
-            _require_range(getattr(self, name), f"actuator.drive_train.{name}", low, high)
+        require_ranges(self, "actuator.drive_train", DRIVE_TRAIN_RANGES)
 
     @property
     def inertia_at_motor_kg_m2(self) -> float:
@@ -160,10 +154,7 @@ class Actuator:
     wear_acceleration: float = 1.0
 
     def __post_init__(self) -> None:
-        require_finite_positive(self, "actuator")  # wear_acceleration, its one float
-        _require_range(
-            self.wear_acceleration, "actuator.wear_acceleration", *WEAR_ACCELERATION_RANGE
-        )
+        require_ranges(self, "actuator", {"wear_acceleration": WEAR_ACCELERATION_RANGE})
 
     def loading_case(self, motor_speed_rad_s: float) -> LoadingCase:
         """The loading case for the motor's direction of rotation (forward at standstill)."""
@@ -204,26 +195,41 @@ def actuator_from_mapping(data: object) -> Actuator:
 
     Keys: preset (required), drive_train (mapping of :class:`DriveTrain` fields),
     misalignment_arcmin ([x, y]), case_forward, case_reverse (1 or 2), wear_acceleration.
-    Unknown keys are refused with their name.
+    Unknown keys are refused with their name; every unknown key and every bad part (preset,
+    drive train, misalignment, loading cases) is named at once, wear_acceleration once they
+    are good.
     """
     if not isinstance(data, dict):
         raise ParameterError("actuator", f"must be a mapping, got {type(data).__name__}")
     unknown = sorted(set(data) - _ACTUATOR_KEYS)
     if unknown:
-        raise ParameterError(
-            f"actuator.{unknown[0]}", f"unknown key; allowed: {sorted(_ACTUATOR_KEYS)}"
+        raise ParameterError.combined(
+            [
+                ParameterError(f"actuator.{key}", f"unknown key; allowed: {sorted(_ACTUATOR_KEYS)}")
+                for key in unknown
+            ]
         )
     if "preset" not in data:
         raise ParameterError("actuator.preset", "missing")
-    drive_train = build_dataclass(DriveTrain, data.get("drive_train"), "actuator.drive_train")
-    return Actuator(
-        preset=load_preset(str(data["preset"])),
-        drive_train=drive_train,
-        misalignment=_misalignment(data.get("misalignment_arcmin", [0.0, 0.0])),
-        case_forward=_case(data.get("case_forward", 2), "actuator.case_forward"),
-        case_reverse=_case(data.get("case_reverse", 1), "actuator.case_reverse"),
-        wear_acceleration=data.get("wear_acceleration", 1.0),
-    )
+    parts: dict[str, Callable[[], object]] = {
+        "preset": lambda: load_preset(str(data["preset"])),
+        "drive_train": lambda: build_dataclass(
+            DriveTrain, data.get("drive_train"), "actuator.drive_train"
+        ),
+        "misalignment": lambda: _misalignment(data.get("misalignment_arcmin", [0.0, 0.0])),
+        "case_forward": lambda: _case(data.get("case_forward", 2), "actuator.case_forward"),
+        "case_reverse": lambda: _case(data.get("case_reverse", 1), "actuator.case_reverse"),
+    }
+    built: dict[str, Any] = {}
+    problems: list[ParameterError] = []
+    for name, build in parts.items():
+        try:
+            built[name] = build()
+        except ParameterError as exc:
+            problems.append(exc)
+    if problems:
+        raise ParameterError.combined(problems)
+    return Actuator(**built, wear_acceleration=data.get("wear_acceleration", 1.0))
 
 
 def preset_beside_file(data: dict[str, Any], path: Path) -> dict[str, Any]:

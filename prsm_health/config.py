@@ -25,10 +25,12 @@ def build_dataclass(cls: type[T], section: object, name: str, **fixed: Any) -> T
     if not isinstance(section, dict):
         raise ParameterError(name, f"must be a mapping, got {type(section).__name__}")
     known = {f.name for f in dataclasses.fields(cls)}  # type: ignore[arg-type]
-    for key in section:
-        if key not in known or key in fixed:
-            allowed = ", ".join(sorted(known - set(fixed)))
-            raise ParameterError(f"{name}.{key}", f"unknown key; allowed: {allowed}")
+    unknown = [key for key in section if key not in known or key in fixed]
+    if unknown:
+        allowed = ", ".join(sorted(known - set(fixed)))
+        raise ParameterError.combined(
+            [ParameterError(f"{name}.{key}", f"unknown key; allowed: {allowed}") for key in unknown]
+        )
     try:
         return cls(**section, **fixed)
     except TypeError as exc:  # a required key is missing

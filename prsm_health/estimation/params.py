@@ -17,14 +17,14 @@ their dotted name. Units are SI except where the name says otherwise.
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass, field, fields
+from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any, Literal
 
 from prsm_health.actuator import Actuator, actuator_from_mapping, preset_beside_file
 from prsm_health.config import build_dataclass
 from prsm_health.physics.errors import ParameterError
-from prsm_health.physics.geometry import require, require_integer, require_real
+from prsm_health.physics.geometry import require, require_integer, require_ranges
 from prsm_health.yamlio import YamlError, load_yaml_mapping
 
 #: The NIS divergence test needs at least this many blocks in its window
@@ -40,19 +40,6 @@ RATED_LOAD_FACTOR = 10.0
 #: can straddle F = 0, where a self-locked screw's friction slope changes sign. The estimator
 #: re-initialises the load there, and the re-initialisation restarts such a load from zero.
 DIVERGED_LOAD_RATIO = 10.0
-
-
-def _require_ranges(obj: object, prefix: str, ranges: dict[str, tuple[float, float]]) -> None:
-    """Every named field is a finite number (:func:`require_real`) inside its closed range
-    [low, high]; it is stored as a float."""
-    for f in fields(obj):  # type: ignore[arg-type]
-        if f.name not in ranges:
-            continue
-        low, high = ranges[f.name]
-        name = f"{prefix}.{f.name}"
-        value = require_real(getattr(obj, f.name), name)
-        require(low <= value <= high, name, f"must be in [{low:g}, {high:g}], got {value!r}")
-        object.__setattr__(obj, f.name, value)
 
 
 @dataclass(frozen=True, kw_only=True)
@@ -79,7 +66,7 @@ class NoiseParams:
     torque_scale_error_rel: float = 0.0
 
     def __post_init__(self) -> None:
-        _require_ranges(
+        require_ranges(
             self,
             "noise",
             {
@@ -140,7 +127,7 @@ class ModelParams:
     wear_coefficient_sigma_ln: float = 0.5
 
     def __post_init__(self) -> None:
-        _require_ranges(
+        require_ranges(
             self,
             "model",
             {
@@ -202,7 +189,7 @@ class FilterParams:
     max_speed_rad_s: float = 0.0
 
     def __post_init__(self) -> None:
-        _require_ranges(
+        require_ranges(
             self,
             "filter",
             {
@@ -278,7 +265,7 @@ class Fidelity:
             "fidelity.filter",
             f"must be ekf or ukf, got {self.filter!r}",
         )
-        _require_ranges(self, "fidelity", {"standstill_block_s": (1e-3, 60.0)})
+        require_ranges(self, "fidelity", {"standstill_block_s": (1e-3, 60.0)})
 
 
 @dataclass(frozen=True, kw_only=True)
@@ -309,7 +296,7 @@ class DiagnosticThresholds:
     rejected_warn_fraction: float = 0.05
 
     def __post_init__(self) -> None:
-        _require_ranges(
+        require_ranges(
             self,
             "diagnostics",
             {
@@ -421,8 +408,8 @@ def params_from_mapping(data: dict[str, Any]) -> EstimatorParams:
         )
     if "actuator" not in data:
         raise ParameterError("actuator", "missing (at least actuator.preset is required)")
-    # Each section is checked, so that one edit fixes every bad section (the first bad value
-    # of each is named; the sections' checks against each other follow).
+    # Each section is checked, so that one edit fixes every bad section (every value out of
+    # its range is named; the checks of values against each other follow).
     problems: list[ParameterError] = []
     sections: dict[str, Any] = {}
     for name, cls in _SECTIONS.items():
@@ -435,8 +422,7 @@ def params_from_mapping(data: dict[str, Any]) -> EstimatorParams:
     except ParameterError as exc:
         problems.insert(0, exc)
     if problems:
-        first, *more = problems
-        raise ParameterError(first.field, "; ".join([first.message, *map(str, more)]))
+        raise ParameterError.combined(problems)
     return EstimatorParams(actuator=actuator, **sections)
 
 

@@ -21,6 +21,13 @@ class ParameterError(PhysicsError, ValueError):
         self.field = field
         self.message = message
 
+    @classmethod
+    def combined(cls, problems: list[ParameterError]) -> ParameterError:
+        """One error for several (at least one): the first's field, every message, so that one
+        edit of a data file can fix them all."""
+        first, *more = problems
+        return cls(first.field, "; ".join([first.message, *map(str, more)]))
+
     def in_file(self, path: object) -> ParameterError:
         """The same error, naming the data file that holds the parameter."""
         return ParameterError(f"{path}: {self.field}", self.message)

@@ -8,6 +8,7 @@ The geometric conventions that the papers leave open are written down in docs/ph
 from __future__ import annotations
 
 import math
+from collections.abc import Mapping
 from dataclasses import dataclass, field, fields
 
 from prsm_health.physics.errors import ParameterError
@@ -63,19 +64,42 @@ def require_integer(value: object, name: str, low: int, high: int | None = None)
     return value
 
 
+def require_ranges(
+    obj: object, prefix: str, ranges: Mapping[str, tuple[float, float] | None]
+) -> None:
+    """Each named field of the frozen dataclass ``obj`` must be a finite number
+    (:func:`require_real`) inside its closed range ``(low, high)``, or > 0 where the range is
+    None; it is stored as a float. Every field that is not is named at once, so that one edit
+    of a data file fixes them all."""
+    problems: list[ParameterError] = []
+    for key, bounds in ranges.items():
+        name = f"{prefix}.{key}"
+        try:
+            value = require_real(getattr(obj, key), name)
+            if bounds is None:
+                require(value > 0.0, name, f"must be > 0, got {value!r}")
+            else:
+                low, high = bounds
+                require(
+                    low <= value <= high, name, f"must be in [{low:g}, {high:g}], got {value!r}"
+                )
+        except ParameterError as exc:
+            problems.append(exc)
+            continue
+        object.__setattr__(obj, key, value)
+    if problems:
+        raise ParameterError.combined(problems)
+
+
 def require_finite_positive(obj: object, prefix: str) -> None:
-    """Every ``float`` field of the frozen dataclass ``obj`` must be a finite number > 0.
+    """Every ``float`` field of the frozen dataclass ``obj`` must be a finite number > 0
+    (:func:`require_ranges`).
 
     Integers are accepted and stored as floats; anything else (a string from a data file, a
     bool) is refused with the field's name (:func:`require_real`).
     """
-    for f in fields(obj):  # type: ignore[arg-type]
-        if f.type not in (float, "float"):
-            continue
-        name = f"{prefix}.{f.name}"
-        value = require_real(getattr(obj, f.name), name)
-        require(value > 0.0, name, f"must be > 0, got {value!r}")
-        object.__setattr__(obj, f.name, value)
+    floats = [f.name for f in fields(obj) if f.type in (float, "float")]  # type: ignore[arg-type]
+    require_ranges(obj, prefix, dict.fromkeys(floats))
 
 
 @dataclass(frozen=True, kw_only=True)
