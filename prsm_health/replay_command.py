@@ -343,4 +343,8 @@ def summary(bag: Path, source: str, result: ReplayResult) -> str:
             f"  jams: {jams}, false declarations {metrics.false_jam_declarations}; {loss}, "
             f"2-sigma coverage {100 * metrics.precision_loss_coverage_2sigma:.0f} %",
         ]
+        if metrics.estimates_beyond_truth:
+            lines.append(
+                f"  {metrics.estimates_beyond_truth} estimates after the truth ends are not scored"
+            )
     return "\n".join(lines)

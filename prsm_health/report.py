@@ -33,7 +33,7 @@ from matplotlib.ticker import MaxNLocator
 from numpy.typing import NDArray
 
 from prsm_health.estimation.estimate import UM_PER_M, EstimateEvent, HealthState
-from prsm_health.estimation.metrics import Metrics, on_truth_clock
+from prsm_health.estimation.metrics import Metrics, on_truth_clock, within_truth
 from prsm_health.signals import TruthSamples
 
 FloatArray = NDArray[np.float64]
@@ -135,7 +135,12 @@ def _load_figure(series: _Series, truth: TruthSamples | None, *, xlabel: str, ti
         figure, (axis, error_axis) = plt.subplots(
             2, 1, figsize=(10, 6), sharex=True, height_ratios=(2, 1)
         )
-        error_kn = series.load_kn - np.interp(t, truth.stamp_s, truth.axial_load_n / 1e3)
+        # Beyond the truth's span the truth is unknown: no error is drawn there.
+        error_kn = np.where(
+            within_truth(t, truth),
+            series.load_kn - np.interp(t, truth.stamp_s, truth.axial_load_n / 1e3),
+            np.nan,
+        )
         two_std = 2.0 * series.load_std_kn
         error_axis.fill_between(t, -two_std, two_std, alpha=0.3, label="+-2 std")
         error_axis.plot(t, error_kn, lw=0.8, label="estimate - truth")
@@ -144,7 +149,12 @@ def _load_figure(series: _Series, truth: TruthSamples | None, *, xlabel: str, ti
             # Scaled to the errors in motion: at standstill and at the stroke ends the load
             # is hardly observed (its band spans tens of kN) and would flatten them.
             size = np.abs(error_kn[series.moving])
-            limit = ERROR_AXIS_MARGIN * float(np.quantile(size, ERROR_AXIS_QUANTILE))
+            size = size[np.isfinite(size)]
+            limit = (
+                ERROR_AXIS_MARGIN * float(np.quantile(size, ERROR_AXIS_QUANTILE))
+                if size.size
+                else SMALLEST_ERROR_AXIS_KN
+            )
             error_axis.set_ylim(
                 -max(limit, SMALLEST_ERROR_AXIS_KN), max(limit, SMALLEST_ERROR_AXIS_KN)
             )

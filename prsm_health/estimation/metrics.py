@@ -28,6 +28,11 @@ Definitions:
 - precision loss: the final error (absolute and relative to the final truth), and the
   fraction of estimates whose truth lies within +-2 std.
 
+Only the estimates inside the truth's span are scored (:func:`within_truth`: from its first
+sample to one truth period after its last): beyond it the truth is unknown, not its last value
+held (a bag cut short whose motor samples outlast its truth was scored against a load frozen
+at its last value); how many were left out is reported.
+
 Estimates are stamped with the sensor's clock. When that clock jumps back (an estimate with
 event TIME_RESET) or its stamps skip ahead (estimates further apart than SKIP_SPACINGS times
 their usual spacing: a clock that jumped ahead, or missing data), the estimates after it are
@@ -104,6 +109,7 @@ class Metrics:
     precision_loss_error_percent: float
     precision_loss_coverage_2sigma: float
     clock_offsets_s: tuple[float, ...] = ()
+    estimates_beyond_truth: int = 0
 
     def to_dict(self) -> dict[str, object]:
         """JSON-able form (``--metrics-json``): a value that could not be computed (NaN, e.g. a
@@ -131,6 +137,16 @@ def score(
         raise ValueError("score: no estimates or no truth to compare")
     offsets = _clock_offsets(states, truth)
     stamps = on_truth_clock(states, offsets)
+    inside = within_truth(stamps, truth)
+    if not inside.any():
+        raise ValueError(
+            f"score: no estimate within the truth's span ({truth.stamp_s[0]:.3f} to "
+            f"{truth.stamp_s[-1]:.3f} s on its clock)"
+        )
+    beyond = len(states) - int(np.count_nonzero(inside))
+    if beyond:
+        states = [state for state, kept in zip(states, inside.tolist(), strict=True) if kept]
+        stamps = stamps[inside]
 
     def interpolated(values: FloatArray) -> FloatArray:
         return np.asarray(np.interp(stamps, truth.stamp_s, values), dtype=np.float64)
@@ -189,6 +205,17 @@ def score(
         ),
         precision_loss_coverage_2sigma=float(np.mean(covered)),
         clock_offsets_s=offsets,
+        estimates_beyond_truth=beyond,
+    )
+
+
+def within_truth(stamps: FloatArray, truth: TruthSamples) -> NDArray[np.bool_]:
+    """Which ``stamps`` (on the truth's clock) the truth covers: from its first sample to one
+    truth period (its median spacing) after its last."""
+    period = float(np.median(np.diff(truth.stamp_s))) if len(truth) > 1 else 0.0
+    return np.asarray(
+        (stamps >= truth.stamp_s[0] - period) & (stamps <= truth.stamp_s[-1] + period),
+        dtype=np.bool_,
     )
 
 

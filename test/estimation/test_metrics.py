@@ -231,3 +231,20 @@ def test_gaps_and_longer_blocks_are_no_clock_jumps(
     metrics = score(states, run, rated_load_n=55e3, largest_screw_speed_rad_s=73.3)
     assert all(offset == 0.0 for offset in metrics.clock_offsets_s)
     assert metrics.load_rmse_n < 1.0
+
+
+def test_estimates_beyond_the_truths_end_are_not_scored() -> None:
+    """A bag cut short whose motor samples outlast its truth: the estimates after the truth's
+    last sample were scored against its last values held (a load RMSE of 15.8 kN at
+    standstill on a truncated nominal-downhole bag whose estimates are right)."""
+    true = truth(10.0, None)  # 20 kN until 9.99 s
+    stamps = np.arange(0.02, 13.0, 0.04)
+    # After the truth ends the load falls to zero, which nothing can score.
+    states = [state(float(t), 20e3 if t < 10.0 else 0.0, 100.0, 0, 1e-6 * t) for t in stamps]
+    metrics = score(states, true, rated_load_n=55e3, largest_screw_speed_rad_s=73.3)
+    assert metrics.estimates_beyond_truth == int(np.count_nonzero(stamps > 10.0))
+    assert metrics.estimates == len(stamps) - metrics.estimates_beyond_truth
+    assert metrics.load_max_error_n == pytest.approx(0.0, abs=1e-9)
+    assert metrics.precision_loss_error_percent == pytest.approx(0.0, abs=0.5)
+    with pytest.raises(ValueError, match="no estimate within the truth's span"):
+        score(states[-5:], true, rated_load_n=55e3, largest_screw_speed_rad_s=73.3)
