@@ -6,8 +6,9 @@ JointState by :class:`~prsm_health.bags.reader.InputTopics`) chunk by chunk, run
 
 - writes an MCAP bag (``out``; with the input bag's rosbag2 ``custom_data``, so a simulated
   bag's scene record goes along) with the inputs, ``/prsm_health/health`` (HealthEstimate) and
-  ``/diagnostics`` (DiagnosticArray, once per second of bag time, input counters brought up
-  to date every OUTPUT_PIECE_SAMPLES samples): the content the node
+  ``/diagnostics`` (DiagnosticArray, once per second of bag time and at the end, the inputs
+  counted at their own stamps, the estimator's counters brought up to date every half second
+  of samples): the content the node
   publishes (both are built by :mod:`prsm_health.outputs`), on the bag's time line;
 - scores the estimates against the bag's ``/truth/state`` (:mod:`~prsm_health.estimation.metrics`).
 
@@ -20,6 +21,7 @@ after it is not scored: :mod:`~prsm_health.estimation.metrics`).
 
 from __future__ import annotations
 
+import math
 import threading
 import time
 from collections import Counter
@@ -60,9 +62,12 @@ from prsm_health.tracking import DiagnosticsTracker, rejected_by_reason
 DIAGNOSTICS_PERIOD_S = 1.0
 #: Samples read per chunk.
 CHUNK_SAMPLES = 20_000
-#: With an output bag, samples are estimated in pieces of this many (1 s at 1 kHz), after each
-#: of which the input-health counters are brought up to date.
+#: With an output bag, samples are estimated in pieces of about half DIAGNOSTICS_PERIOD_S (by
+#: their usual spacing), at most this many, after each of which the input-health counters are
+#: brought up to date and the diagnostics written when due.
 OUTPUT_PIECE_SAMPLES = 1000
+#: Received messages are counted for the input rate in bins of this much bag time.
+RECEIVED_BIN_S = 0.01
 
 
 @dataclass(frozen=True)
@@ -127,7 +132,7 @@ def replay(
         started = time.perf_counter()
         for chunk in _chunks(bag, topics, damage):
             # With an output bag, the diagnostics need the input counters once a second.
-            step = OUTPUT_PIECE_SAMPLES if output is not None else len(chunk)
+            step = _piece_samples(chunk) if output is not None else len(chunk)
             for begin in range(0, len(chunk), step):
                 piece = chunk[begin : begin + step]
                 new = estimator.process(piece)
@@ -190,6 +195,18 @@ def _truth(bag: Path, damage: list[BagError]) -> TruthSamples | None:
     return truth
 
 
+def _piece_samples(chunk: MotorSamples) -> int:
+    """How many samples of ``chunk`` make about half DIAGNOSTICS_PERIOD_S by their usual
+    spacing (at most OUTPUT_PIECE_SAMPLES), so that the diagnostics are written about once per
+    period whatever the input rate."""
+    spacing = np.diff(chunk.stamp_s)
+    spacing = spacing[np.isfinite(spacing) & (spacing > 0.0)]
+    if not spacing.size:
+        return OUTPUT_PIECE_SAMPLES
+    per_period = 0.5 * DIAGNOSTICS_PERIOD_S / float(np.median(spacing))
+    return int(min(max(per_period, 1.0), OUTPUT_PIECE_SAMPLES))
+
+
 class _Output:
     """The replay's output bag: inputs, health estimates, diagnostics once per second."""
 
@@ -203,7 +220,8 @@ class _Output:
         self._hardware_id = hardware_id
         self._diagnostics = DiagnosticsTracker()
         self._latest: HealthState | None = None
-        self._next_diagnostics_s: float | None = None
+        self._diagnostics_due_s: float | None = None
+        self._diagnostics_written_s: float | None = None
         types = typestore().types
         self._health_type = types[HEALTH_ESTIMATE]
         self._header = types["std_msgs/msg/Header"]
@@ -236,26 +254,36 @@ class _Output:
         """Write a chunk's inputs and the estimates and diagnostics they led to."""
         if samples is not None and len(samples):
             write_motor_states(self._writer, samples)
+            stamps = samples.stamp_s[np.isfinite(samples.stamp_s)]
+            bins, counts = np.unique(np.floor(stamps / RECEIVED_BIN_S), return_counts=True)
+            for bin_index, count in zip(bins.tolist(), counts.tolist(), strict=True):
+                self._diagnostics.inputs.receive((bin_index + 1) * RECEIVED_BIN_S, count)
         replaced: Counter[str] = Counter()
         for state in states:
             fields = health_estimate_fields(state, replaced=replaced)
             header = self._header(stamp=self._stamp(state.stamp_s), frame_id=self._hardware_id)
             message = self._health_type(header=header, **_typed(fields))
             self._writer.write(HEALTH_TOPIC, _log_time_ns(state.stamp_s), message)
-        now = float(states[-1].stamp_s) if states else None
-        if now is None:
+        if states:
+            self._latest = states[-1]
+        if self._latest is None:
             return
-        received = len(samples) if samples is not None else 0
-        rejected = rejected_by_reason(counters, {})
-        self._diagnostics.inputs.update(now, received, counters.accepted, rejected)
+        # Bag time: the latest estimate's stamp (a piece without one is judged at the last).
+        now = float(self._latest.stamp_s)
+        self._diagnostics.inputs.judge(now, counters.accepted, rejected_by_reason(counters, {}))
         self._diagnostics.events.observe(now, states, counters)
         self._diagnostics.events.non_finite(now, replaced)
-        self._latest = states[-1]
-        due = self._next_diagnostics_s
-        # Due, or the bag's clock went back (the schedule belongs to the old time line).
-        if due is None or not due - DIAGNOSTICS_PERIOD_S <= now < due:
+        due, written = self._diagnostics_due_s, self._diagnostics_written_s
+        if due is None or now < due - DIAGNOSTICS_PERIOD_S:
+            # The first, or the bag's clock went back: a schedule on the new time line.
+            due = now
+        if now >= due or (samples is None and written is not None and now > written):
+            # Due (once per period of bag time on a fixed grid), or the end: the last
+            # estimate's diagnostics.
             self._write_diagnostics(now)
-            self._next_diagnostics_s = now + DIAGNOSTICS_PERIOD_S
+            self._diagnostics_written_s = now
+            due += DIAGNOSTICS_PERIOD_S * (math.floor((now - due) / DIAGNOSTICS_PERIOD_S) + 1)
+        self._diagnostics_due_s = due
 
     def _write_diagnostics(self, now_s: float) -> None:
         statuses = self._diagnostics.statuses(self._latest, self._params, self._hardware_id, now_s)

@@ -61,13 +61,23 @@ class InputTracker:
         self, now_s: float, received: int, accepted: int, rejected: Mapping[str, int]
     ) -> None:
         """Record ``received`` new messages and the estimator's totals after processing them."""
+        self.receive(now_s, received)
+        self.judge(now_s, accepted, rejected)
+
+    def receive(self, now_s: float, received: int) -> None:
+        """Record ``received`` messages that came at ``now_s`` (an offline replay gives them
+        at their own stamps, in bins; the rate counts those up to the time asked)."""
         if self._received and now_s < self._received[-1][0]:
             self._received.clear()
-            self._judged.clear()
         if received:
             self._received_total += received
             self._last_sample_s = now_s
             self._received.append((now_s, received))
+
+    def judge(self, now_s: float, accepted: int, rejected: Mapping[str, int]) -> None:
+        """Record the estimator's totals at ``now_s``."""
+        if self._judged and now_s < self._judged[-1][0]:
+            self._judged.clear()
         new_accepted = accepted - self._accepted
         new_rejected = {
             reason: count - self._rejected.get(reason, 0)
@@ -93,10 +103,16 @@ class InputTracker:
         for _, _, reasons in self._judged:
             recent.update(reasons)
         judged = accepted + sum(recent.values())
+        # Messages counted at their own stamps may lie ahead of now_s (an offline replay):
+        # not received yet.
+        ahead = sum(count for time, count in self._received if time > now_s)
+        last_sample_s = self._last_sample_s
+        if ahead:
+            last_sample_s = max((time for time, _ in self._received if time <= now_s), default=None)
         return InputHealth(
-            rate_hz=sum(count for _, count in self._received) / WINDOW_S,
-            last_sample_s=self._last_sample_s,
-            received=self._received_total,
+            rate_hz=sum(count for time, count in self._received if time <= now_s) / WINDOW_S,
+            last_sample_s=last_sample_s,
+            received=self._received_total - ahead,
             accepted=self._accepted - self._start_accepted,
             rejected={
                 reason: count - self._start_rejected.get(reason, 0)

@@ -444,7 +444,10 @@ def test_diagnostics_go_on_after_the_clock_jumps_back(bag: Path, tmp_path: Path)
     # (7 s, the line's end): now they go on from the time reset (the first 0.1 s rejected).
     new_line = np.array(seconds[jump:])
     assert len(new_line) >= 4 and new_line[0] < stamps[half] + 1.2
-    assert np.all(np.diff(new_line) > 0.9)
+    # Once per second of the new line, and the last estimate's at the end.
+    spacing = np.diff(new_line[:-1])
+    assert np.all((spacing > 0.5) & (spacing < 1.6)), new_line
+    assert new_line[-1] == pytest.approx(result.states[-1].stamp_s)
 
 
 def test_the_load_plot_shows_the_error_inside_its_band_when_there_is_truth(bag: Path) -> None:
@@ -501,3 +504,41 @@ def test_the_load_plot_shows_the_error_inside_its_band_when_there_is_truth(bag: 
     finally:
         plt.close(with_truth)
         plt.close(without)
+
+
+def test_the_diagnostics_of_a_slow_input_say_its_rate(tmp_path: Path) -> None:
+    """A 50 Hz bag: the replay counted the inputs per piece of 1000 samples (20 s here) at
+    the latest estimate, so its /diagnostics said "1000 Hz" (OK against 100 Hz) three times
+    in 60 s. The inputs now count at their own stamps and the diagnostics come once per
+    second of bag time, the last one at the last estimate."""
+    slow = tmp_path / "slow"
+    scene = {**SCENE, "rate_hz": 50.0, "truth_rate_hz": 50.0, "joint_states": False}
+    record(Simulator(scene_from_mapping(scene)), slow)
+    out = tmp_path / "out"
+    result = replay(slow, params(), out=out)
+    store = typestore()
+    with Reader(out) as reader:
+        arrays = [
+            store.deserialize_cdr(raw, c.msgtype)
+            for c, _, raw in reader.messages()
+            if c.topic == DIAGNOSTICS_TOPIC
+        ]
+    stamps = [a.header.stamp.sec + 1e-9 * a.header.stamp.nanosec for a in arrays]
+    assert 11 <= len(arrays) <= 14, stamps  # once per second of the 12 s bag, and the end
+    assert stamps[-1] == pytest.approx(result.states[-1].stamp_s)
+    inputs = [
+        {kv.key: kv.value for kv in status.values}
+        for array in arrays
+        for status in array.status
+        if status.name.endswith("input health")
+    ]
+    levels = [
+        status.level
+        for array in arrays
+        for status in array.status
+        if status.name.endswith("input health")
+    ]
+    # After the first second (a window not yet full) every one says 50 Hz, a WARN.
+    assert all(float(values["rate_hz"]) == pytest.approx(50.0, abs=2.0) for values in inputs[2:])
+    assert set(levels[2:]) == {1}
+    assert int(inputs[-1]["received"]) == pytest.approx(50 * result.states[-1].stamp_s, abs=2)
