@@ -1,7 +1,8 @@
 """The health estimator: motor samples in, :class:`HealthState` estimates out.
 
 One object serves offline replay (chunks of thousands of samples), the ROS node (one sample at
-a time) and the benchmark; results do not depend on the chunking. The pipeline per block:
+a time) and the benchmark; results do not depend on the chunking (but for the sample counters
+an estimate carries, which count every sample judged when it was made). The pipeline per block:
 :class:`~prsm_health.estimation.inputs.SampleBlocker` (validation, blocks) ->
 :class:`~prsm_health.estimation.hypotheses.JamHypotheses` (IMM of filterpy filters over the
 jam count, measurement model of :mod:`~prsm_health.estimation.measurement`) ->
