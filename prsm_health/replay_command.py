@@ -216,24 +216,27 @@ def run_replay(args: argparse.Namespace) -> int:
             hardware_id=args.hardware_id,
             stop=stop,
         )
-    print(summary(args.bag, source, result))
     written = [f"bag {args.out}"] if args.out is not None else []
     if not result.counters.accepted:
+        print(summary(args.bag, source, result))
         why = f"no sample of {args.bag} accepted: {_rejected_why(args.bag, topics, result)}"
         if result.damage is not None:  # the damage says more than what it left
             print(f"  {why}")
             return 1
         raise ValueError(why)
+    # The outputs first, the summary after them: a reader that leaves early (``| head``)
+    # must not cost the files.
+    notes = []
     simulated = result.truth is not None and len(result.truth) > 0
     if scene is None and simulated and not records_actuator(args.bag):
-        print(
+        notes.append(
             f"  note: {args.bag} has a ground truth but no record of its scene's actuator (a"
             " bag cut short loses it): --scene NAME|FILE gives the estimator the scene's"
         )
     partial = _partial(result)
     if args.metrics_json is not None:
         if result.metrics is None:
-            print(f"  --metrics-json: not written, {args.bag} has no ground truth to score")
+            notes.append(f"  --metrics-json: not written, {args.bag} has no ground truth to score")
         else:
             document = {**result.metrics.to_dict(), "samples_read": result.samples}
             document["partial"] = partial or None
@@ -254,6 +257,7 @@ def run_replay(args: argparse.Namespace) -> int:
         except OSError as exc:
             raise ValueError(f"--report: cannot write into {args.report}: {exc}") from exc
         written.append(f"report {args.report / 'index.html'}")
+    print("\n".join([summary(args.bag, source, result), *notes]))
     if written:
         print(f"  wrote {', '.join(written)}")
     if result.stopped:

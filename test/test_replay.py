@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import argparse
 import dataclasses
 import json
 import math
@@ -542,3 +543,29 @@ def test_the_diagnostics_of_a_slow_input_say_its_rate(tmp_path: Path) -> None:
     assert all(float(values["rate_hz"]) == pytest.approx(50.0, abs=2.0) for values in inputs[2:])
     assert set(levels[2:]) == {1}
     assert int(inputs[-1]["received"]) == pytest.approx(50 * result.states[-1].stamp_s, abs=2)
+
+
+def test_a_reader_that_leaves_early_does_not_cost_the_outputs(
+    bag: Path, tmp_path: Path, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    """``prsm-health replay ... | head -2``: the summary was printed before the metrics and
+    the report were written, so a reader gone before it (exit 141) left neither, and the
+    output bag, already written, blocked the rerun."""
+
+    class GoneReader:
+        def write(self, text: str) -> int:
+            raise BrokenPipeError(32, "Broken pipe")
+
+        def flush(self) -> None:
+            pass
+
+    report, metrics = tmp_path / "report", tmp_path / "metrics.json"
+    argv = ["replay", str(bag), "--report", str(report), "--metrics-json", str(metrics)]
+    parser = argparse.ArgumentParser()
+    replay_command.add_replay_command(parser.add_subparsers())
+    args = parser.parse_args(argv)
+    monkeypatch.setattr("sys.stdout", GoneReader())
+    with pytest.raises(BrokenPipeError):
+        replay_command.run_replay(args)
+    assert json.loads(metrics.read_text())["estimates"] > 0
+    assert (report / "index.html").is_file()
