@@ -339,7 +339,16 @@ class HealthEstimator:
         )
 
     def process(self, samples: MotorSamples) -> list[HealthState]:
-        """Feed samples (any number); returns the estimates of the blocks they complete."""
+        """Feed samples (any number); returns the estimates of the blocks they complete.
+
+        Raises:
+            TypeError: ``samples`` is not a :class:`~prsm_health.signals.MotorSamples`.
+        """
+        if not isinstance(samples, MotorSamples):
+            raise TypeError(
+                "process: samples must be a prsm_health.signals.MotorSamples (stamp_s, "
+                f"current_a, speed_rad_s, position_rad columns), got {type(samples).__name__}"
+            )
         return self._run(self._blocker.feed(samples))
 
     def finish(self) -> list[HealthState]:

@@ -436,8 +436,9 @@ def load_params_mapping(path: Path) -> dict[str, Any]:
     return preset_beside_file(load_yaml_mapping(path), path)
 
 
-def load_params(path: Path) -> EstimatorParams:
+def load_params(path: str | Path) -> EstimatorParams:
     """Load a params YAML file; errors name the file (and the bad key)."""
+    path = Path(path)
     try:
         return params_from_mapping(load_params_mapping(path))
     except YamlError as exc:

@@ -607,3 +607,17 @@ def test_maintenance_flags_must_be_bools() -> None:
         estimator.reset_after_maintenance(0, reset_precision_loss=True, reset_fatigue_damage=False)
         == []
     )
+
+
+def test_the_package_serves_a_library_user_as_its_docstring_shows() -> None:
+    """From Python: ``from prsm_health.estimation import HealthEstimator`` failed (an empty
+    package), ``load_params`` refused a str path with an AttributeError, and ``process(None)``
+    said "'NoneType' object has no attribute 'stamp_s'"."""
+    import prsm_health.estimation as estimation
+
+    params = estimation.load_params(str(estimation.bundled_params_file()))
+    estimator = estimation.HealthEstimator(params)
+    states = estimator.process(_steady(_MS[:200])) + estimator.finish()
+    assert states and all(isinstance(s, estimation.HealthState) for s in states)
+    with pytest.raises(TypeError, match="must be a prsm_health.signals.MotorSamples.*NoneType"):
+        estimator.process(None)  # type: ignore[arg-type]
