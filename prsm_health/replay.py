@@ -5,7 +5,9 @@ JointState by :class:`~prsm_health.bags.reader.InputTopics`) chunk by chunk, run
 :class:`~prsm_health.estimation.estimator.HealthEstimator`, and optionally
 
 - writes an MCAP bag (``out``; with the input bag's rosbag2 ``custom_data``, so a simulated
-  bag's scene record goes along) with the inputs, ``/prsm_health/health`` (HealthEstimate) and
+  bag's scene record goes along) with the inputs (as ``/motor_state`` MotorState, also when
+  read from JointState), the bag's ``/truth/state`` if it has one, ``/prsm_health/health``
+  (HealthEstimate) and
   ``/diagnostics`` (DiagnosticArray, once per second of bag time and at the end, the inputs
   counted at their own stamps, the estimator's counters brought up to date every half second
   of samples): the content the node
@@ -44,6 +46,7 @@ from prsm_health.bags import (
     iter_motor_samples,
     read_truth,
     write_motor_states,
+    write_truth,
 )
 from prsm_health.bags.bagfiles import custom_data
 from prsm_health.bags.stamps import seconds_to_stamps
@@ -153,7 +156,9 @@ def replay(
         states += last
         if output is not None:
             output.add(None, last, estimator.counters)
-    truth = _truth(bag, damage)
+        truth = _truth(bag, damage)
+        if output is not None and truth is not None and len(truth):
+            write_truth(output.writer, truth)  # beside the estimates, for a viewer
     metrics = None
     if truth is not None and states and len(truth):
         preset = params.actuator.preset
@@ -208,14 +213,15 @@ def _piece_samples(chunk: MotorSamples) -> int:
 
 
 class _Output:
-    """The replay's output bag: inputs, health estimates, diagnostics once per second."""
+    """The replay's output bag: inputs, health estimates, diagnostics once per second
+    (``writer``: the bag, for the truth the replay copies into it at the end)."""
 
     def __init__(
         self, path: Path, params: EstimatorParams, hardware_id: str, custom: dict[str, str]
     ) -> None:
-        self._writer = BagWriter(path)
+        self.writer = BagWriter(path)
         for key, value in custom.items():  # what a simulated input bag records of its scene
-            self._writer.set_custom_data(key, value)
+            self.writer.set_custom_data(key, value)
         self._params = params
         self._hardware_id = hardware_id
         self._diagnostics = DiagnosticsTracker()
@@ -231,9 +237,9 @@ class _Output:
         self._key_value = types["diagnostic_msgs/msg/KeyValue"]
 
     def __enter__(self) -> _Output:
-        self._writer.__enter__()
-        self._writer.add_topic(HEALTH_TOPIC, HEALTH_ESTIMATE)
-        self._writer.add_topic(DIAGNOSTICS_TOPIC, DIAGNOSTIC_ARRAY)
+        self.writer.__enter__()
+        self.writer.add_topic(HEALTH_TOPIC, HEALTH_ESTIMATE)
+        self.writer.add_topic(DIAGNOSTICS_TOPIC, DIAGNOSTIC_ARRAY)
         return self
 
     def __exit__(
@@ -242,7 +248,7 @@ class _Output:
         error: BaseException | None,
         trace: TracebackType | None,
     ) -> None:
-        self._writer.__exit__(kind, error, trace)
+        self.writer.__exit__(kind, error, trace)
 
     def _stamp(self, seconds: float) -> Any:
         sec, nanosec = seconds_to_stamps([seconds])
@@ -253,7 +259,7 @@ class _Output:
     ) -> None:
         """Write a chunk's inputs and the estimates and diagnostics they led to."""
         if samples is not None and len(samples):
-            write_motor_states(self._writer, samples)
+            write_motor_states(self.writer, samples)
             stamps = samples.stamp_s[np.isfinite(samples.stamp_s)]
             bins, counts = np.unique(np.floor(stamps / RECEIVED_BIN_S), return_counts=True)
             for bin_index, count in zip(bins.tolist(), counts.tolist(), strict=True):
@@ -263,7 +269,7 @@ class _Output:
             fields = health_estimate_fields(state, replaced=replaced)
             header = self._header(stamp=self._stamp(state.stamp_s), frame_id=self._hardware_id)
             message = self._health_type(header=header, **_typed(fields))
-            self._writer.write(HEALTH_TOPIC, _log_time_ns(state.stamp_s), message)
+            self.writer.write(HEALTH_TOPIC, _log_time_ns(state.stamp_s), message)
         if states:
             self._latest = states[-1]
         if self._latest is None:
@@ -291,7 +297,7 @@ class _Output:
             header=self._header(stamp=self._stamp(now_s), frame_id=""),
             status=[self._status_message(s) for s in statuses],
         )
-        self._writer.write(DIAGNOSTICS_TOPIC, _log_time_ns(now_s), message)
+        self.writer.write(DIAGNOSTICS_TOPIC, _log_time_ns(now_s), message)
 
     def _status_message(self, status: DiagnosticStatusData) -> Any:
         return self._status(

@@ -23,7 +23,7 @@ from rosbags.rosbag2 import Reader
 from prsm_health import replay as replay_module
 from prsm_health import replay_command
 from prsm_health.bags import MOTOR_STATE, InputTopics, read_motor_samples, read_truth
-from prsm_health.bags.topics import DIAGNOSTICS_TOPIC, HEALTH_TOPIC
+from prsm_health.bags.topics import DIAGNOSTICS_TOPIC, HEALTH_TOPIC, TRUTH_TOPIC
 from prsm_health.bags.typestore import typestore
 from prsm_health.bags.writer import BagWriter, write_motor_states, write_truth
 from prsm_health.cli import main
@@ -87,6 +87,7 @@ def test_replay_estimates_scores_and_writes_what_the_node_publishes(
             if c.topic == HEALTH_TOPIC
         ]
     assert counts["/motor_state"] == 12_000
+    assert counts[TRUTH_TOPIC] == len(read_truth(bag))  # to view beside the estimates
     assert counts[HEALTH_TOPIC] == len(result.states)
     assert 8 <= counts[DIAGNOSTICS_TOPIC] <= 13  # once per second of the 12 s bag
     last = health[-1]

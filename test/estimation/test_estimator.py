@@ -619,5 +619,5 @@ def test_the_package_serves_a_library_user_as_its_docstring_shows() -> None:
     estimator = estimation.HealthEstimator(params)
     states = estimator.process(_steady(_MS[:200])) + estimator.finish()
     assert states and all(isinstance(s, estimation.HealthState) for s in states)
-    with pytest.raises(TypeError, match="must be a prsm_health.signals.MotorSamples.*NoneType"):
+    with pytest.raises(TypeError, match=r"must be a prsm_health\.signals\.MotorSamples .*NoneType"):
         estimator.process(None)  # type: ignore[arg-type]
