@@ -91,6 +91,22 @@ def actuator_fingerprint(params: EstimatorParams) -> str:
     )
 
 
+def actuator_parts(params: EstimatorParams) -> dict[str, str]:
+    """A digest of each part of :func:`actuator_fingerprint` beyond the screw, by the name a
+    message gives it: saved with a state, so that a restore can say which of them changed."""
+    actuator = params.actuator
+    return {
+        "drive train": _digest((actuator.drive_train,)),
+        "misalignment": _digest((actuator.misalignment,)),
+        "ripple states": "on" if params.radial_terms else "off",
+    }
+
+
+#: What a partial restore names when the state file does not say which part changed (saved
+#: before the parts were).
+SOME_PART = "drive train, misalignment or ripple states"
+
+
 class HealthEstimator:
     """Estimates load, jammed rollers, precision loss and fatigue from motor samples."""
 
@@ -152,6 +168,7 @@ class HealthEstimator:
             "format": SNAPSHOT_FORMAT,
             "screw": screw_fingerprint(self.params),
             "actuator": actuator_fingerprint(self.params),
+            "parts": actuator_parts(self.params),
             "hypotheses": [
                 {
                     "count": h.count,
@@ -169,7 +186,7 @@ class HealthEstimator:
             "samples_rejected": self.counters.rejected,
         }
 
-    def restore(self, snapshot: dict[str, Any]) -> bool:
+    def restore(self, snapshot: dict[str, Any]) -> tuple[str, ...]:
         """Resume from :meth:`snapshot`. The first block after it follows a hole of unknown
         length.
 
@@ -180,7 +197,9 @@ class HealthEstimator:
         were estimated through the old parameters.
 
         Returns:
-            Whether the filters' states were resumed too (False: only the screw's part).
+            What differs from the saved state's parameters, by name ("drive train",
+            "misalignment", "ripple states"; SOME_PART for a state saved before it said): empty
+            when the filters' states were resumed too, else only the screw's part was.
 
         Raises:
             SnapshotError: the snapshot is malformed or of another screw (nothing is changed
@@ -255,16 +274,22 @@ class HealthEstimator:
             )
         if foreign is not None:
             raise ForeignStateError(foreign)
+        changed: tuple[str, ...] = ()
         if whole:
             self._bank.restore(states)
         else:
             self._bank.restart_filters([(state[0], state[4]) for state in states])
+            saved_parts = snapshot.get("parts")
+            changed = (SOME_PART,)
+            if isinstance(saved_parts, dict):
+                parts = actuator_parts(self.params).items()
+                changed = tuple(name for name, digest in parts if saved_parts.get(name) != digest)
         self._degradation.state = degradation
         self.counters.accepted = accepted
         self.counters.rejected = rejected
         self._resumed = True
         self._last = None
-        return whole
+        return changed or (() if whole else (SOME_PART,))
 
     def reset_after_maintenance(
         self, jammed_rollers: int, *, reset_precision_loss: bool, reset_fatigue_damage: bool

@@ -47,13 +47,17 @@ FORMAT = "prsm_health.state/1"
 #: screw, or another hardware_id), which resumes once moved back under matching parameters.
 CORRUPT_SUFFIX = "corrupt"
 FOREIGN_SUFFIX = "foreign"
-#: The problem of a state file restored for the same screw under other parameters
-#: (:meth:`HealthEstimator.restore`).
-PARAMETERS_CHANGED = (
-    "the drive train, misalignment or ripple states differ from the saved state's: the "
-    "precision loss, fatigue damage and jam-count probabilities are resumed, the load is "
-    "estimated afresh"
-)
+
+
+def parameters_changed(parts: tuple[str, ...]) -> str:
+    """The problem of a state file restored for the same screw under other parameters: which
+    ``parts`` differ (:meth:`HealthEstimator.restore`) and what was resumed."""
+    named = " and ".join(parts)
+    verb = "differ" if len(parts) > 1 or " or " in named else "differs"
+    return (
+        f"the {named} {verb} from the saved state's: the precision loss, fatigue damage and "
+        "jam-count probabilities are resumed, the load is estimated afresh"
+    )
 
 
 def default_state_file(hardware_id: str) -> Path:
@@ -125,7 +129,7 @@ class StateStore:
             return self._keep_aside(f"unreadable state file {self.path}: {exc}")
         try:
             document = json.loads(text)
-            whole = estimator.restore(self._snapshot(document))
+            changed = estimator.restore(self._snapshot(document))
         except ForeignStateError as exc:
             problem = (
                 f"state file {self.path} of another actuator ({exc}); to resume from it, move "
@@ -136,7 +140,7 @@ class StateStore:
             return self._keep_aside(f"unusable state file {self.path}: {exc}")
         except RecursionError:  # json.loads of lists nested thousands deep
             return self._keep_aside(f"unusable state file {self.path}: nested too deeply")
-        partly = "" if whole else PARAMETERS_CHANGED
+        partly = parameters_changed(changed) if changed else ""
         try:
             last_estimate = _estimate(document.get("last_estimate"))
         except SnapshotError as exc:  # only the diagnostics' copy: the state is restored

@@ -11,7 +11,12 @@ import numpy as np
 import pytest
 
 from prsm_health.actuator import Actuator
-from prsm_health.estimation.estimator import ForeignStateError, HealthEstimator, SnapshotError
+from prsm_health.estimation.estimator import (
+    SOME_PART,
+    ForeignStateError,
+    HealthEstimator,
+    SnapshotError,
+)
 from prsm_health.estimation.params import EstimatorParams, Fidelity
 from prsm_health.physics.presets import load_preset
 from prsm_health.signals import MotorSamples
@@ -33,7 +38,7 @@ def test_a_restored_estimator_continues_the_precision_loss() -> None:
     before = first.process(moving(3.0))
     saved = json.loads(json.dumps(first.snapshot()))  # survives JSON
     resumed = HealthEstimator(params())
-    assert resumed.restore(saved) is True  # the whole state
+    assert resumed.restore(saved) == ()  # the whole state: nothing differs
     after = resumed.process(moving(1.0, start_s=3.0))
     assert before[-1].precision_loss_m > 0.0
     assert after[0].precision_loss_m >= before[-1].precision_loss_m
@@ -81,7 +86,7 @@ def test_a_state_saved_before_the_screw_fingerprint_still_resumes() -> None:
     assert saved["actuator"] == hashlib.sha256(repr(old).encode()).hexdigest()[:16]
     assert saved["actuator"] == "cef0f10e4fa49d5a"  # what the code of 85945b2 saved for it
     del saved["screw"]
-    assert HealthEstimator(base).restore(saved) is True
+    assert HealthEstimator(base).restore(saved) == ()
     with pytest.raises(SnapshotError, match=r"^the state belongs to another actuator \(the pre"):
         HealthEstimator(_changed(base, "drive train")).restore(saved)
 
@@ -109,7 +114,7 @@ def test_the_same_screw_under_other_parameters_keeps_its_degradation_and_jams(ch
     saved = json.loads(json.dumps(first.snapshot()))
     other = _changed(params(), change)
     resumed = HealthEstimator(other)
-    assert resumed.restore(saved) is False  # only the screw's part
+    assert resumed.restore(saved) == (change,)  # only the screw's part, and which part changed
     assert resumed._degradation.state == worn
     assert [(h.count, h.log_prob) for h in resumed._bank.hypotheses] == [(2, 0.0)]
     fresh = HealthEstimator(other)._bank.hypotheses[0].filter
@@ -126,7 +131,7 @@ def test_an_unpruned_bank_restarts_every_count_with_its_probability() -> None:
     saved["hypotheses"][0]["log_probability"] = math.log(0.25)
     saved["hypotheses"][1]["log_probability"] = math.log(0.75)
     resumed = HealthEstimator(_changed(unpruned, "drive train"))
-    assert resumed.restore(saved) is False
+    assert resumed.restore(saved) == ("drive train",)
     probabilities = [math.exp(h.log_prob) for h in resumed._bank.hypotheses]
     assert [h.count for h in resumed._bank.hypotheses] == list(range(11))
     assert probabilities[:2] == pytest.approx([0.25, 0.75]) and sum(probabilities[2:]) == 0.0
@@ -223,13 +228,21 @@ def test_the_saved_estimate_brought_up_to_now_takes_the_filters_load() -> None:
     saved_estimate = first.process(moving(3.0))[-1]
     saved = json.loads(json.dumps(first.snapshot()))
     whole = HealthEstimator(params())
-    assert whole.restore(saved) is True
+    assert whole.restore(saved) == ()
     now = whole.current_state(saved_estimate)
     assert now is not None and now.axial_load_n == pytest.approx(saved_estimate.axial_load_n)
     assert now.axial_load_std_n == pytest.approx(saved_estimate.axial_load_std_n)
     partial = HealthEstimator(_changed(params(), "drive train"))
-    assert partial.restore(saved) is False
+    assert partial.restore(saved) == ("drive train",)
     afresh = partial.current_state(saved_estimate)
     assert afresh is not None and afresh.axial_load_n == 0.0
     assert afresh.axial_load_std_n > 50e3 > 100.0 * saved_estimate.axial_load_std_n
     assert afresh.precision_loss_m == saved_estimate.precision_loss_m  # the screw's, kept
+
+
+def test_a_state_saved_before_the_parts_says_some_part_changed() -> None:
+    """Files saved before 2026-11-26 (third session) do not say which part of the actuator
+    they were saved under: the restore says one of them changed, not which."""
+    saved = HealthEstimator(params()).snapshot()
+    del saved["parts"]
+    assert HealthEstimator(_changed(params(), "drive train")).restore(saved) == (SOME_PART,)

@@ -16,7 +16,6 @@ from prsm_health.estimation.params import EstimatorParams, params_from_mapping
 from prsm_health.outputs import Level, PersistenceHealth, persistence_status
 from prsm_health.ros.persistence import (
     FORMAT,
-    PARAMETERS_CHANGED,
     StateStore,
     default_state_file,
 )
@@ -198,12 +197,17 @@ def test_state_of_the_same_screw_under_another_drive_train_is_resumed_in_part(
     fresh = HealthEstimator(recalibrated)
     outcome = store.restore(fresh)
     assert outcome.restored and outcome.kept_aside is None
-    assert outcome.problem == PARAMETERS_CHANGED and outcome.last_estimate is not None
+    # Which part changed (it said "the drive train, misalignment or ripple states differ").
+    changed = (
+        "the drive train differs from the saved state's: the precision loss, fatigue damage "
+        "and jam-count probabilities are resumed, the load is estimated afresh"
+    )
+    assert outcome.problem == changed and outcome.last_estimate is not None
     assert fresh.snapshot()["degradation"] == worn.snapshot()["degradation"]
     assert list(tmp_path.iterdir()) == [store.path]
     health = PersistenceHealth(str(store.path), restored=True, problem=outcome.problem)
     status = persistence_status(health, "left", 0.0)
-    assert status.message == f"resumed from the state file; {PARAMETERS_CHANGED}"
+    assert status.message == f"resumed from the state file; {changed}"
 
 
 def test_state_of_another_actuator_or_hardware_is_kept_aside_as_foreign(
