@@ -349,6 +349,7 @@ def summary(bag: Path, source: str, result: ReplayResult) -> str:
         ]
         if metrics.estimates_beyond_truth:
             lines.append(
-                f"  {metrics.estimates_beyond_truth} estimates after the truth ends are not scored"
+                f"  {metrics.estimates_beyond_truth} estimates outside the truth's span are "
+                "not scored"
             )
     return "\n".join(lines)

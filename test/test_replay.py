@@ -370,6 +370,16 @@ def test_a_truth_with_a_non_finite_value_is_scored_up_to_it(
     report = tmp_path / "report"
     assert main(["replay", str(broken), "--scene", "sudden-jam", "--report", str(report)]) == 1
     assert "DAMAGED" in capsys.readouterr().out and (report / "load.png").is_file()
+    # Cut before the first estimate: nothing to score, and still a damaged bag's report (the
+    # scoring raised "no estimate within the truth's span": exit 2, no summary).
+    load[1] = math.nan
+    early = tmp_path / "early-nan"
+    with BagWriter(early) as writer:
+        write_motor_states(writer, read_motor_samples(bag, InputTopics()))
+        write_truth(writer, dataclasses.replace(truth, axial_load_n=load))
+    assert main(["replay", str(early), "--scene", "sudden-jam"]) == 1
+    out = capsys.readouterr().out
+    assert "DAMAGED" in out and "outside the truth's span are not scored" in out
 
 
 def test_metrics_that_cannot_be_computed_are_null_in_the_json(

@@ -28,10 +28,11 @@ Definitions:
 - precision loss: the final error (absolute and relative to the final truth), and the
   fraction of estimates whose truth lies within +-2 std.
 
-Only the estimates inside the truth's span are scored (:func:`within_truth`: from its first
-sample to one truth period after its last): beyond it the truth is unknown, not its last value
-held (a bag cut short whose motor samples outlast its truth was scored against a load frozen
-at its last value); how many were left out is reported.
+Only the estimates inside the truth's span are scored (:func:`within_truth`: to one truth
+period beyond its first and last samples): outside it the truth is unknown, not its first or
+last value held (a bag cut short whose motor samples outlast its truth was scored against a
+load frozen at its last value); how many were left out is reported (with none inside, nothing
+is scored).
 
 Estimates are stamped with the sensor's clock. When that clock jumps back (an estimate with
 event TIME_RESET) or its stamps skip ahead (estimates further apart than SKIP_SPACINGS times
@@ -109,6 +110,7 @@ class Metrics:
     precision_loss_error_percent: float
     precision_loss_coverage_2sigma: float
     clock_offsets_s: tuple[float, ...] = ()
+    #: Estimates outside the truth's span, not scored (module docstring).
     estimates_beyond_truth: int = 0
 
     def to_dict(self) -> dict[str, object]:
@@ -138,12 +140,9 @@ def score(
     offsets = _clock_offsets(states, truth)
     stamps = on_truth_clock(states, offsets)
     inside = within_truth(stamps, truth)
-    if not inside.any():
-        raise ValueError(
-            f"score: no estimate within the truth's span ({truth.stamp_s[0]:.3f} to "
-            f"{truth.stamp_s[-1]:.3f} s on its clock)"
-        )
     beyond = len(states) - int(np.count_nonzero(inside))
+    if not inside.any():  # e.g. a truth cut at a damage before the first block ended
+        return _nothing_scored(beyond, offsets)
     if beyond:
         states = [state for state, kept in zip(states, inside.tolist(), strict=True) if kept]
         stamps = stamps[inside]
@@ -209,9 +208,37 @@ def score(
     )
 
 
+def _nothing_scored(beyond: int, offsets: tuple[float, ...]) -> Metrics:
+    """The metrics of a run none of whose ``beyond`` estimates lies inside the truth's span:
+    nothing could be computed (NaN, JSON null), nothing was found or declared."""
+    nan = math.nan
+    return Metrics(
+        estimates=0,
+        moving_estimates=0,
+        load_rmse_n=nan,
+        load_rmse_percent_rated=nan,
+        load_max_error_n=nan,
+        load_nees_mean=nan,
+        load_nees_interval=(nan, nan),
+        load_nees_consistent=False,
+        load_standstill_rmse_n=nan,
+        load_standstill_max_error_n=nan,
+        load_standstill_coverage_2sigma=nan,
+        jams=(),
+        false_jam_declarations=0,
+        false_jam_seconds=0.0,
+        precision_loss_final_m=nan,
+        precision_loss_truth_final_m=nan,
+        precision_loss_error_percent=nan,
+        precision_loss_coverage_2sigma=nan,
+        clock_offsets_s=offsets,
+        estimates_beyond_truth=beyond,
+    )
+
+
 def within_truth(stamps: FloatArray, truth: TruthSamples) -> NDArray[np.bool_]:
-    """Which ``stamps`` (on the truth's clock) the truth covers: from its first sample to one
-    truth period (its median spacing) after its last."""
+    """Which ``stamps`` (on the truth's clock) the truth covers: from one truth period (its
+    median spacing) before its first sample to one after its last."""
     period = float(np.median(np.diff(truth.stamp_s))) if len(truth) > 1 else 0.0
     return np.asarray(
         (stamps >= truth.stamp_s[0] - period) & (stamps <= truth.stamp_s[-1] + period),

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import dataclasses
+import math
 from typing import Any
 
 import numpy as np
@@ -246,5 +247,8 @@ def test_estimates_beyond_the_truths_end_are_not_scored() -> None:
     assert metrics.estimates == len(stamps) - metrics.estimates_beyond_truth
     assert metrics.load_max_error_n == pytest.approx(0.0, abs=1e-9)
     assert metrics.precision_loss_error_percent == pytest.approx(0.0, abs=0.5)
-    with pytest.raises(ValueError, match="no estimate within the truth's span"):
-        score(states[-5:], true, rated_load_n=55e3, largest_screw_speed_rad_s=73.3)
+    # None inside (a truth cut at a damage before the first block): nothing scored, no error
+    # (it raised, and the replay lost its DAMAGED summary with it).
+    outside = score(states[-5:], true, rated_load_n=55e3, largest_screw_speed_rad_s=73.3)
+    assert (outside.estimates, outside.estimates_beyond_truth, outside.jams) == (0, 5, ())
+    assert math.isnan(outside.load_rmse_n) and outside.to_dict()["load_rmse_n"] is None
