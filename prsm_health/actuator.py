@@ -196,23 +196,23 @@ def actuator_from_mapping(data: object) -> Actuator:
     Keys: preset (required), drive_train (mapping of :class:`DriveTrain` fields),
     misalignment_arcmin ([x, y]), case_forward, case_reverse (1 or 2), wear_acceleration.
     Unknown keys are refused with their name; every unknown key and every bad part (preset,
-    drive train, misalignment, loading cases) is named at once, wear_acceleration once they
-    are good.
+    drive train, misalignment, loading cases) is named in one error, wear_acceleration once
+    they are good.
     """
     if not isinstance(data, dict):
         raise ParameterError("actuator", f"must be a mapping, got {type(data).__name__}")
-    unknown = sorted(set(data) - _ACTUATOR_KEYS)
-    if unknown:
-        raise ParameterError.combined(
-            [
-                ParameterError(f"actuator.{key}", f"unknown key; allowed: {sorted(_ACTUATOR_KEYS)}")
-                for key in unknown
-            ]
-        )
-    if "preset" not in data:
-        raise ParameterError("actuator.preset", "missing")
+    problems = [
+        ParameterError(f"actuator.{key}", f"unknown key; allowed: {sorted(_ACTUATOR_KEYS)}")
+        for key in sorted(set(data) - _ACTUATOR_KEYS)
+    ]
+
+    def preset() -> Preset:
+        if "preset" not in data:
+            raise ParameterError("actuator.preset", "missing")
+        return load_preset(str(data["preset"]))
+
     parts: dict[str, Callable[[], object]] = {
-        "preset": lambda: load_preset(str(data["preset"])),
+        "preset": preset,
         "drive_train": lambda: build_dataclass(
             DriveTrain, data.get("drive_train"), "actuator.drive_train"
         ),
@@ -221,7 +221,6 @@ def actuator_from_mapping(data: object) -> Actuator:
         "case_reverse": lambda: _case(data.get("case_reverse", 1), "actuator.case_reverse"),
     }
     built: dict[str, Any] = {}
-    problems: list[ParameterError] = []
     for name, build in parts.items():
         try:
             built[name] = build()

@@ -18,7 +18,8 @@ def build_dataclass(cls: type[T], section: object, name: str, **fixed: Any) -> T
     """``cls(**section, **fixed)``, refusing non-mappings and unknown keys by dotted name.
 
     Missing keys take the dataclass defaults; a missing key without default is named too.
-    The dataclass's own validation (``__post_init__``) names bad values.
+    The dataclass's own validation (``__post_init__``) names bad values; every unknown key and
+    bad value is named in one error.
     """
     if section is None:
         section = {}
@@ -26,12 +27,18 @@ def build_dataclass(cls: type[T], section: object, name: str, **fixed: Any) -> T
         raise ParameterError(name, f"must be a mapping, got {type(section).__name__}")
     known = {f.name for f in dataclasses.fields(cls)}  # type: ignore[arg-type]
     unknown = [key for key in section if key not in known or key in fixed]
-    if unknown:
-        allowed = ", ".join(sorted(known - set(fixed)))
-        raise ParameterError.combined(
-            [ParameterError(f"{name}.{key}", f"unknown key; allowed: {allowed}") for key in unknown]
-        )
+    allowed = ", ".join(sorted(known - set(fixed)))
+    problems = [
+        ParameterError(f"{name}.{key}", f"unknown key; allowed: {allowed}") for key in unknown
+    ]
+    # The known values are checked too: one run names every problem of the section.
+    values = {key: value for key, value in section.items() if key not in unknown}
     try:
-        return cls(**section, **fixed)
+        built = cls(**values, **fixed)
+    except ParameterError as exc:
+        problems.append(exc)
     except TypeError as exc:  # a required key is missing
-        raise ParameterError(name, str(exc)) from exc
+        problems.append(ParameterError(name, str(exc)))
+    if problems:
+        raise ParameterError.combined(problems)
+    return built

@@ -8,9 +8,9 @@ JointState by :class:`~prsm_health.bags.reader.InputTopics`) chunk by chunk, run
   bag's scene record goes along) with the inputs (as ``/motor_state`` MotorState, also when
   read from JointState), the bag's ``/truth/state`` if it has one, ``/prsm_health/health``
   (HealthEstimate) and
-  ``/diagnostics`` (DiagnosticArray, once per second of bag time and at the end, the inputs
-  counted at their own stamps, the estimator's counters brought up to date every half second
-  of samples): the content the node
+  ``/diagnostics`` (DiagnosticArray, once per second of the inputs' clock and at the end: the
+  latest accepted sample's stamp, as a node's run on the time it receives; the estimator's
+  counters brought up to date every half second of samples): the content the node
   publishes (both are built by :mod:`prsm_health.outputs`), on the bag's time line;
 - scores the estimates against the bag's ``/truth/state`` (:mod:`~prsm_health.estimation.metrics`).
 
@@ -69,7 +69,7 @@ CHUNK_SAMPLES = 20_000
 #: their usual spacing), at most this many, after each of which the input-health counters are
 #: brought up to date and the diagnostics written when due.
 OUTPUT_PIECE_SAMPLES = 1000
-#: Received messages are counted for the input rate in bins of this much bag time.
+#: Received messages are spread over the bag time of their piece in bins of this length.
 RECEIVED_BIN_S = 0.01
 
 
@@ -142,7 +142,7 @@ def replay(
                 elapsed += time.perf_counter() - started
                 states += new
                 if output is not None:
-                    output.add(piece, new, estimator.counters)
+                    output.add(piece, new, estimator)
                 started = time.perf_counter()
             samples += len(chunk)
             if progress is not None:
@@ -155,7 +155,7 @@ def replay(
         elapsed += time.perf_counter() - started
         states += last
         if output is not None:
-            output.add(None, last, estimator.counters)
+            output.add(None, last, estimator)
         truth = _truth(bag, damage)
         if output is not None and truth is not None and len(truth):
             write_truth(output.writer, truth)  # beside the estimates, for a viewer
@@ -200,16 +200,21 @@ def _truth(bag: Path, damage: list[BagError]) -> TruthSamples | None:
     return truth
 
 
+def _usual_spacing(samples: MotorSamples) -> float:
+    """The median positive spacing of the samples' finite stamps [s] (0 if there is none)."""
+    spacing = np.diff(samples.stamp_s)
+    spacing = spacing[np.isfinite(spacing) & (spacing > 0.0)]
+    return float(np.median(spacing)) if spacing.size else 0.0
+
+
 def _piece_samples(chunk: MotorSamples) -> int:
     """How many samples of ``chunk`` make about half DIAGNOSTICS_PERIOD_S by their usual
     spacing (at most OUTPUT_PIECE_SAMPLES), so that the diagnostics are written about once per
     period whatever the input rate."""
-    spacing = np.diff(chunk.stamp_s)
-    spacing = spacing[np.isfinite(spacing) & (spacing > 0.0)]
-    if not spacing.size:
+    spacing = _usual_spacing(chunk)
+    if spacing <= 0.0:
         return OUTPUT_PIECE_SAMPLES
-    per_period = 0.5 * DIAGNOSTICS_PERIOD_S / float(np.median(spacing))
-    return int(min(max(per_period, 1.0), OUTPUT_PIECE_SAMPLES))
+    return int(min(max(0.5 * DIAGNOSTICS_PERIOD_S / spacing, 1.0), OUTPUT_PIECE_SAMPLES))
 
 
 class _Output:
@@ -228,6 +233,8 @@ class _Output:
         self._latest: HealthState | None = None
         self._diagnostics_due_s: float | None = None
         self._diagnostics_written_s: float | None = None
+        self._received_until_s: float | None = None
+        self._unplaced = 0
         types = typestore().types
         self._health_type = types[HEALTH_ESTIMATE]
         self._header = types["std_msgs/msg/Header"]
@@ -255,15 +262,17 @@ class _Output:
         return self._time(sec=int(sec[0]), nanosec=int(nanosec[0]))
 
     def add(
-        self, samples: MotorSamples | None, states: list[HealthState], counters: InputCounters
+        self, samples: MotorSamples | None, states: list[HealthState], estimator: HealthEstimator
     ) -> None:
-        """Write a chunk's inputs and the estimates and diagnostics they led to."""
+        """Write a piece's inputs and the estimates it led to, and the diagnostics when due
+        (``samples`` None: the end, after the estimator's ``finish``).
+
+        The diagnostics run on the inputs' clock (:attr:`HealthEstimator.input_clock_s`, the
+        latest accepted sample's stamp, which a broken stamp does not move), as a node's run on
+        the time it receives them; they describe the latest estimate. A piece's messages are
+        received spread over the time its samples advanced that clock."""
         if samples is not None and len(samples):
             write_motor_states(self.writer, samples)
-            stamps = samples.stamp_s[np.isfinite(samples.stamp_s)]
-            bins, counts = np.unique(np.floor(stamps / RECEIVED_BIN_S), return_counts=True)
-            for bin_index, count in zip(bins.tolist(), counts.tolist(), strict=True):
-                self._diagnostics.inputs.receive((bin_index + 1) * RECEIVED_BIN_S, count)
         replaced: Counter[str] = Counter()
         for state in states:
             fields = health_estimate_fields(state, replaced=replaced)
@@ -272,10 +281,13 @@ class _Output:
             self.writer.write(HEALTH_TOPIC, _log_time_ns(state.stamp_s), message)
         if states:
             self._latest = states[-1]
-        if self._latest is None:
-            return
-        # Bag time: the latest estimate's stamp (a piece without one is judged at the last).
-        now = float(self._latest.stamp_s)
+        self._unplaced += len(samples) if samples is not None else 0
+        now = estimator.input_clock_s
+        if now is None or self._latest is None:
+            return  # nothing accepted or estimated yet: counted when there is
+        counters = estimator.counters
+        self._receive(now, self._unplaced, samples)
+        self._unplaced = 0
         self._diagnostics.inputs.judge(now, counters.accepted, rejected_by_reason(counters, {}))
         self._diagnostics.events.observe(now, states, counters)
         self._diagnostics.events.non_finite(now, replaced)
@@ -283,13 +295,36 @@ class _Output:
         if due is None or now < due - DIAGNOSTICS_PERIOD_S:
             # The first, or the bag's clock went back: a schedule on the new time line.
             due = now
-        if now >= due or (samples is None and written is not None and now > written):
-            # Due (once per period of bag time on a fixed grid), or the end: the last
-            # estimate's diagnostics.
+        # A piece ends about every half period: one that ends less than half a piece before
+        # the grid's time is due (else it waited a piece more: 1.5 s between two).
+        early = 0.25 * DIAGNOSTICS_PERIOD_S
+        if now >= due - early or (samples is None and written is not None and now > written):
+            # Due (once per period of bag time on a fixed grid), or the end.
             self._write_diagnostics(now)
             self._diagnostics_written_s = now
-            due += DIAGNOSTICS_PERIOD_S * (math.floor((now - due) / DIAGNOSTICS_PERIOD_S) + 1)
+            due += DIAGNOSTICS_PERIOD_S * (
+                math.floor((now + early - due) / DIAGNOSTICS_PERIOD_S) + 1
+            )
         self._diagnostics_due_s = due
+
+    def _receive(self, now_s: float, count: int, samples: MotorSamples | None) -> None:
+        """The input tracker receives ``count`` messages spread evenly over the time the inputs'
+        clock advanced since it last received (at most their number at the piece's usual
+        spacing back; all at ``now_s`` if the clock did not move), in RECEIVED_BIN_S bins: the
+        rate over the last second then counts what came in it."""
+        previous, self._received_until_s = self._received_until_s, now_s
+        if not count:
+            return
+        span = _usual_spacing(samples) * count if samples is not None else 0.0
+        start = now_s - span
+        if previous is not None and previous <= now_s:
+            start = max(previous, start)
+        bins = max(1, math.ceil((now_s - start) / RECEIVED_BIN_S))
+        cumulative = np.round(np.linspace(0.0, count, bins + 1)).astype(np.int64)
+        ends = np.linspace(start, now_s, bins + 1)[1:]
+        for end, part in zip(ends.tolist(), np.diff(cumulative).tolist(), strict=True):
+            if part:
+                self._diagnostics.inputs.receive(end, part)
 
     def _write_diagnostics(self, now_s: float) -> None:
         statuses = self._diagnostics.statuses(self._latest, self._params, self._hardware_id, now_s)

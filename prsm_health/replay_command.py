@@ -186,7 +186,7 @@ def run_replay(args: argparse.Namespace) -> int:
 
     Raises:
         ValueError: an output that cannot be written, or no sample of the bag accepted (the
-            summary is printed first).
+            summary is printed before the error).
     """
     params, source, scene = _params(args)
     _check_outputs(args)
@@ -233,6 +233,27 @@ def run_replay(args: argparse.Namespace) -> int:
             f"  note: {args.bag} has a ground truth but no record of its scene's actuator (a"
             " bag cut short loses it): --scene NAME|FILE gives the estimator the scene's"
         )
+    try:
+        written += _write_outputs(args, result, notes)
+    except ValueError:
+        print(summary(args.bag, source, result))  # what was replayed, before what failed
+        raise
+    print("\n".join([summary(args.bag, source, result), *notes]))
+    if written:
+        print(f"  wrote {', '.join(written)}")
+    if result.stopped:
+        return EXIT_INTERRUPTED
+    return 1 if result.damage is not None else 0
+
+
+def _write_outputs(args: argparse.Namespace, result: ReplayResult, notes: list[str]) -> list[str]:
+    """Write the metrics JSON and the report that ``args`` ask for; returns what was written,
+    adds to ``notes`` what was not and why.
+
+    Raises:
+        ValueError: an output that cannot be written, naming it.
+    """
+    written = []
     partial = _partial(result)
     if args.metrics_json is not None:
         if result.metrics is None:
@@ -257,12 +278,7 @@ def run_replay(args: argparse.Namespace) -> int:
         except OSError as exc:
             raise ValueError(f"--report: cannot write into {args.report}: {exc}") from exc
         written.append(f"report {args.report / 'index.html'}")
-    print("\n".join([summary(args.bag, source, result), *notes]))
-    if written:
-        print(f"  wrote {', '.join(written)}")
-    if result.stopped:
-        return EXIT_INTERRUPTED
-    return 1 if result.damage is not None else 0
+    return written
 
 
 def _partial(result: ReplayResult) -> str:

@@ -65,8 +65,8 @@ class InputTracker:
         self.judge(now_s, accepted, rejected)
 
     def receive(self, now_s: float, received: int) -> None:
-        """Record ``received`` messages that came at ``now_s`` (an offline replay gives them
-        at their own stamps, in bins; the rate counts those up to the time asked)."""
+        """Record ``received`` messages that came at ``now_s`` (an offline replay spreads a
+        piece's over the bag time it covers)."""
         if self._received and now_s < self._received[-1][0]:
             self._received.clear()
         if received:
@@ -103,16 +103,10 @@ class InputTracker:
         for _, _, reasons in self._judged:
             recent.update(reasons)
         judged = accepted + sum(recent.values())
-        # Messages counted at their own stamps may lie ahead of now_s (an offline replay):
-        # not received yet.
-        ahead = sum(count for time, count in self._received if time > now_s)
-        last_sample_s = self._last_sample_s
-        if ahead:
-            last_sample_s = max((time for time, _ in self._received if time <= now_s), default=None)
         return InputHealth(
-            rate_hz=sum(count for time, count in self._received if time <= now_s) / WINDOW_S,
-            last_sample_s=last_sample_s,
-            received=self._received_total - ahead,
+            rate_hz=sum(count for _, count in self._received) / WINDOW_S,
+            last_sample_s=self._last_sample_s,
+            received=self._received_total,
             accepted=self._accepted - self._start_accepted,
             rejected={
                 reason: count - self._start_rejected.get(reason, 0)

@@ -136,6 +136,12 @@ class HealthEstimator:
         return self._blocker.counters
 
     @property
+    def input_clock_s(self) -> float | None:
+        """The stamp of the latest accepted input sample (:attr:`SampleBlocker.input_clock_s`):
+        the offline replay's clock for the diagnostics, as a node's is the time it receives."""
+        return self._blocker.input_clock_s
+
+    @property
     def log_evidence(self) -> float:
         """log p(y) of the blocks that weighed the jam counts so far, under the filter bank's
         model (the sum of the log normalisers of the counts' probabilities)."""

@@ -184,6 +184,15 @@ class SampleBlocker:
         self._previous_current = math.nan  # last sample before the pending ones
         self._stuck_run = 0  # length of the identical-current run ending there
 
+    @property
+    def input_clock_s(self) -> float | None:
+        """The stamp of the latest sample accepted so far that is not held back: the time line
+        the inputs are on (a rejected stamp does not move it, a time reset it follows moves it
+        back; None before the first)."""
+        if len(self._pending):
+            return float(self._pending.stamp_s[-1])
+        return self._last_sample_stamp
+
     def feed(self, samples: MotorSamples) -> list[Block]:
         """Validate ``samples`` and return the blocks they complete (in time order)."""
         ok = self._in_range(samples)

@@ -40,12 +40,7 @@ from pathlib import Path
 from typing import Any
 
 from prsm_health.estimation.estimate import EstimateEvent, HealthState
-from prsm_health.estimation.estimator import (
-    SOME_PART,
-    ForeignStateError,
-    HealthEstimator,
-    SnapshotError,
-)
+from prsm_health.estimation.estimator import ForeignStateError, HealthEstimator, SnapshotError
 
 FORMAT = "prsm_health.state/1"
 #: Suffixes of a state file kept aside: damaged, or a sound state of another actuator (another
@@ -57,11 +52,10 @@ FOREIGN_SUFFIX = "foreign"
 def parameters_changed(parts: tuple[str, ...]) -> str:
     """The problem of a state file restored for the same screw under other parameters: which
     ``parts`` differ (:meth:`HealthEstimator.restore`) and what was resumed."""
-    named = " and ".join(parts)
-    verb = "differs" if len(parts) == 1 and parts != (SOME_PART,) else "differ"
     return (
-        f"the {named} {verb} from the saved state's: the precision loss, fatigue damage and "
-        "jam-count probabilities are resumed, the load is estimated afresh"
+        f"the {' and the '.join(parts)} changed since the state was saved: the precision "
+        "loss, fatigue damage and jam-count probabilities are resumed, the load is estimated "
+        "afresh"
     )
 
 

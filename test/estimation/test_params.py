@@ -368,6 +368,12 @@ def test_every_bad_value_and_unknown_key_of_a_section_is_named_at_once() -> None
     assert info.value.field == "noise.curent_std_a"
     assert "noise.sped_std_rad_s: unknown key" in str(info.value)
     assert "noise.current_std_a:" not in str(info.value)
+    # An unknown key hid the section's bad values.
+    both = {"filter": {"gate_nis": -1.0, "typo": 1}, "actuator": {"prest": "x"}}
+    with pytest.raises(ParameterError) as info:
+        params_from_mapping(both)
+    for named in ("filter.typo", "filter.gate_nis", "actuator.prest", "actuator.preset: missing"):
+        assert str(info.value).count(named) == 1, info.value
     actuator = {
         "preset": "dong2022-downhole",
         "drive_train": {"gear_ratio": 0.5, "gear_efficiency": 2.0},

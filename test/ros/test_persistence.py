@@ -199,8 +199,8 @@ def test_state_of_the_same_screw_under_another_drive_train_is_resumed_in_part(
     assert outcome.restored and outcome.kept_aside is None
     # Which part changed (it said "the drive train, misalignment or ripple states differ").
     changed = (
-        "the drive train differs from the saved state's: the precision loss, fatigue damage "
-        "and jam-count probabilities are resumed, the load is estimated afresh"
+        "the drive train changed since the state was saved: the precision loss, fatigue "
+        "damage and jam-count probabilities are resumed, the load is estimated afresh"
     )
     assert outcome.problem == changed and outcome.last_estimate is not None
     assert fresh.snapshot()["degradation"] == worn.snapshot()["degradation"]
