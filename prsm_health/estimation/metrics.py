@@ -45,7 +45,8 @@ unless another matches clearly better); the offsets found are reported, one per 
 from __future__ import annotations
 
 import math
-from dataclasses import asdict, dataclass
+from dataclasses import asdict, dataclass, fields
+from typing import Any
 
 import numpy as np
 from numpy.typing import NDArray
@@ -211,29 +212,19 @@ def score(
 def _nothing_scored(beyond: int, offsets: tuple[float, ...]) -> Metrics:
     """The metrics of a run none of whose ``beyond`` estimates lies inside the truth's span:
     nothing could be computed (NaN, JSON null), nothing was found or declared."""
-    nan = math.nan
-    return Metrics(
+    values: dict[str, Any] = {f.name: math.nan for f in fields(Metrics)}
+    values.update(
         estimates=0,
         moving_estimates=0,
-        load_rmse_n=nan,
-        load_rmse_percent_rated=nan,
-        load_max_error_n=nan,
-        load_nees_mean=nan,
-        load_nees_interval=(nan, nan),
+        load_nees_interval=(math.nan, math.nan),
         load_nees_consistent=False,
-        load_standstill_rmse_n=nan,
-        load_standstill_max_error_n=nan,
-        load_standstill_coverage_2sigma=nan,
         jams=(),
         false_jam_declarations=0,
         false_jam_seconds=0.0,
-        precision_loss_final_m=nan,
-        precision_loss_truth_final_m=nan,
-        precision_loss_error_percent=nan,
-        precision_loss_coverage_2sigma=nan,
         clock_offsets_s=offsets,
         estimates_beyond_truth=beyond,
     )
+    return Metrics(**values)
 
 
 def within_truth(stamps: FloatArray, truth: TruthSamples) -> NDArray[np.bool_]:
