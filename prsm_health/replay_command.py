@@ -255,12 +255,14 @@ def _write_outputs(args: argparse.Namespace, result: ReplayResult, notes: list[s
     """
     written = []
     partial = _partial(result)
+    document = None
+    if result.metrics is not None:  # the metrics JSON, and the report's index page
+        document = {**result.metrics.to_dict(), "samples_read": result.samples}
+        document["partial"] = partial or None
     if args.metrics_json is not None:
-        if result.metrics is None:
+        if document is None:
             notes.append(f"  --metrics-json: not written, {args.bag} has no ground truth to score")
         else:
-            document = {**result.metrics.to_dict(), "samples_read": result.samples}
-            document["partial"] = partial or None
             text = json.dumps(document, indent=2, allow_nan=False)
             try:
                 args.metrics_json.write_text(text + "\n")
@@ -274,7 +276,14 @@ def _write_outputs(args: argparse.Namespace, result: ReplayResult, notes: list[s
 
         try:
             title = f"{args.bag.name} ({partial})" if partial else args.bag.name
-            write_report(args.report, result.states, result.truth, result.metrics, title=title)
+            write_report(
+                args.report,
+                result.states,
+                result.truth,
+                result.metrics,
+                title=title,
+                scores=document,
+            )
         except OSError as exc:
             raise ValueError(f"--report: cannot write into {args.report}: {exc}") from exc
         written.append(f"report {args.report / 'index.html'}")

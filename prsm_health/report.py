@@ -17,6 +17,7 @@ from __future__ import annotations
 
 import html
 import json
+from collections.abc import Mapping
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -199,8 +200,12 @@ def write_report(
     metrics: Metrics | None,
     *,
     title: str,
+    scores: Mapping[str, object] | None = None,
 ) -> list[Path]:
-    """Write the plots and ``index.html`` into ``directory`` (created); returns the files."""
+    """Write the plots and ``index.html`` into ``directory`` (created); returns the files.
+
+    ``scores``: what the index page lists (the replay's metrics JSON, with what it adds to
+    ``metrics``); by default ``metrics`` itself."""
     if not states:
         raise ValueError("report: no estimates to plot")
     directory.mkdir(parents=True, exist_ok=True)
@@ -256,20 +261,22 @@ def write_report(
         plt.close(figure)
         files.append(path)
     index = directory / "index.html"
-    index.write_text(_index_html(title, metrics), encoding="utf-8")
+    if scores is None and metrics is not None:
+        scores = metrics.to_dict()
+    index.write_text(_index_html(title, scores), encoding="utf-8")
     files.append(index)
     return files
 
 
-def _index_html(title: str, metrics: Metrics | None) -> str:
-    scores = (
-        f"<pre>{html.escape(json.dumps(metrics.to_dict(), indent=2))}</pre>"
-        if metrics is not None
+def _index_html(title: str, scores: Mapping[str, object] | None) -> str:
+    listed = (
+        f"<pre>{html.escape(json.dumps(scores, indent=2))}</pre>"
+        if scores is not None
         else "<p>The bag has no ground truth (/truth/state): no metrics.</p>"
     )
     images = "\n".join(f'<p><img src="{name}" alt="{name}"></p>' for name in PLOTS)
     return (
         f"<!doctype html>\n<html><head><meta charset='utf-8'><title>{html.escape(title)}"
         f"</title></head>\n<body><h1>{html.escape(title)}</h1>\n{images}\n"
-        f"<h2>Metrics</h2>\n{scores}\n</body></html>\n"
+        f"<h2>Metrics</h2>\n{listed}\n</body></html>\n"
     )

@@ -189,6 +189,9 @@ def test_cli_writes_report_and_metrics_and_exits_1_on_damage(
     ]
     scores = json.loads(metrics.read_text())
     assert scores["jams"][0]["count"] == 1 and scores["false_jam_declarations"] == 0
+    # The index page lists what the metrics JSON holds (it left out samples_read, partial).
+    index = (report / "index.html").read_text()
+    assert "&quot;samples_read&quot;: 12000" in index and "&quot;partial&quot;: null" in index
 
     damaged = tmp_path / "cut"
     shutil.copytree(bag, damaged)
