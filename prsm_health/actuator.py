@@ -24,7 +24,7 @@ from typing import Any
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
-from prsm_health.config import build_dataclass
+from prsm_health.config import build_dataclass, build_each
 from prsm_health.physics.errors import ParameterError
 from prsm_health.physics.geometry import (
     Misalignment,
@@ -220,14 +220,7 @@ def actuator_from_mapping(data: object) -> Actuator:
         "case_forward": lambda: _case(data.get("case_forward", 2), "actuator.case_forward"),
         "case_reverse": lambda: _case(data.get("case_reverse", 1), "actuator.case_reverse"),
     }
-    built: dict[str, Any] = {}
-    for name, build in parts.items():
-        try:
-            built[name] = build()
-        except ParameterError as exc:
-            problems.append(exc)
-    if problems:
-        raise ParameterError.combined(problems)
+    built = build_each(parts, problems)
     return Actuator(**built, wear_acceleration=data.get("wear_acceleration", 1.0))
 
 

@@ -7,6 +7,7 @@ refused with the dotted name of the key, not ignored or reported as a Python Typ
 from __future__ import annotations
 
 import dataclasses
+from collections.abc import Callable, Mapping
 from typing import Any, TypeVar
 
 from prsm_health.physics.errors import ParameterError
@@ -41,4 +42,22 @@ def build_dataclass(cls: type[T], section: object, name: str, **fixed: Any) -> T
         problems.append(ParameterError(name, str(exc)))
     if problems:
         raise ParameterError.combined(problems)
+    return built
+
+
+def build_each(
+    parts: Mapping[str, Callable[[], Any]], problems: list[ParameterError] | None = None
+) -> dict[str, Any]:
+    """Each part built, by name; the ParameterErrors of all of them (after ``problems``, found
+    before) raised as one (:meth:`ParameterError.combined`), so that one edit of a data file
+    can fix every bad part."""
+    found = list(problems or ())
+    built: dict[str, Any] = {}
+    for name, build in parts.items():
+        try:
+            built[name] = build()
+        except ParameterError as exc:
+            found.append(exc)
+    if found:
+        raise ParameterError.combined(found)
     return built

@@ -17,12 +17,14 @@ their dotted name. Units are SI except where the name says otherwise.
 from __future__ import annotations
 
 import math
+from collections.abc import Callable
 from dataclasses import dataclass, field
+from functools import partial
 from pathlib import Path
 from typing import Any, Literal
 
 from prsm_health.actuator import Actuator, actuator_from_mapping, preset_beside_file
-from prsm_health.config import build_dataclass
+from prsm_health.config import build_dataclass, build_each
 from prsm_health.physics.errors import ParameterError
 from prsm_health.physics.geometry import require, require_integer, require_ranges
 from prsm_health.yamlio import YamlError, load_yaml_mapping
@@ -408,22 +410,14 @@ def params_from_mapping(data: dict[str, Any]) -> EstimatorParams:
         )
     if "actuator" not in data:
         raise ParameterError("actuator", "missing (at least actuator.preset is required)")
-    # Each section is checked, so that one edit fixes every bad section (every value out of
+    # Every section is checked, so that one edit fixes every bad section (every value out of
     # its range is named; the checks of values against each other follow).
-    problems: list[ParameterError] = []
-    sections: dict[str, Any] = {}
+    parts: dict[str, Callable[[], Any]] = {
+        "actuator": lambda: actuator_from_mapping(data["actuator"])
+    }
     for name, cls in _SECTIONS.items():
-        try:
-            sections[name] = build_dataclass(cls, data.get(name), name)
-        except ParameterError as exc:
-            problems.append(exc)
-    try:
-        actuator = actuator_from_mapping(data["actuator"])
-    except ParameterError as exc:
-        problems.insert(0, exc)
-    if problems:
-        raise ParameterError.combined(problems)
-    return EstimatorParams(actuator=actuator, **sections)
+        parts[name] = partial(build_dataclass, cls, data.get(name), name)
+    return EstimatorParams(**build_each(parts))
 
 
 def load_params_mapping(path: Path) -> dict[str, Any]:
