@@ -93,11 +93,11 @@ def _mark_events(axis: Axes, series: _Series) -> list[Line2D]:
     first = []
     for event, (label, colour, style) in MARKED_EVENTS.items():
         for i, time_s in enumerate(series.stamp_s[series.events == event]):
-            line = axis.axvline(time_s, color=colour, ls=style, lw=1.0, label=label)
+            # One legend entry per kind: matplotlib leaves out labels starting with "_".
+            shown = label if i == 0 else f"_{label}"
+            line = axis.axvline(time_s, color=colour, ls=style, lw=1.0, label=shown)
             if i == 0:
                 first.append(line)
-            else:
-                line.set_label(f"_{label}")  # one legend entry per kind
     return first
 
 

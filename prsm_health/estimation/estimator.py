@@ -107,6 +107,15 @@ def actuator_parts(params: EstimatorParams) -> dict[str, str]:
 SOME_PART = "drive train, misalignment or ripple states"
 
 
+def _changed_parts(saved: object, params: EstimatorParams) -> tuple[str, ...]:
+    """The parts of :func:`actuator_parts` whose digest differs from the ``saved`` ones (a
+    snapshot's "parts"), or (SOME_PART,) when the snapshot does not say."""
+    if not isinstance(saved, dict):
+        return (SOME_PART,)
+    parts = actuator_parts(params).items()
+    return tuple(name for name, digest in parts if saved.get(name) != digest) or (SOME_PART,)
+
+
 class HealthEstimator:
     """Estimates load, jammed rollers, precision loss and fatigue from motor samples."""
 
@@ -280,22 +289,16 @@ class HealthEstimator:
             )
         if foreign is not None:
             raise ForeignStateError(foreign)
-        changed: tuple[str, ...] = ()
         if whole:
             self._bank.restore(states)
         else:
             self._bank.restart_filters([(state[0], state[4]) for state in states])
-            saved_parts = snapshot.get("parts")
-            changed = (SOME_PART,)
-            if isinstance(saved_parts, dict):
-                parts = actuator_parts(self.params).items()
-                changed = tuple(name for name, digest in parts if saved_parts.get(name) != digest)
         self._degradation.state = degradation
         self.counters.accepted = accepted
         self.counters.rejected = rejected
         self._resumed = True
         self._last = None
-        return changed or (() if whole else (SOME_PART,))
+        return () if whole else _changed_parts(snapshot.get("parts"), self.params)
 
     def reset_after_maintenance(
         self, jammed_rollers: int, *, reset_precision_loss: bool, reset_fatigue_damage: bool
