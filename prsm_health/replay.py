@@ -135,14 +135,15 @@ def replay(
         started = time.perf_counter()
         for chunk in _chunks(bag, topics, damage):
             # With an output bag, the diagnostics need the input counters once a second.
-            step = _piece_samples(chunk) if output is not None else len(chunk)
+            spacing = _usual_spacing(chunk) if output is not None else 0.0
+            step = _piece_samples(spacing) if output is not None else len(chunk)
             for begin in range(0, len(chunk), step):
                 piece = chunk[begin : begin + step]
                 new = estimator.process(piece)
                 elapsed += time.perf_counter() - started
                 states += new
                 if output is not None:
-                    output.add(piece, new, estimator)
+                    output.add(piece, new, estimator, spacing_s=spacing)
                 started = time.perf_counter()
             samples += len(chunk)
             if progress is not None:
@@ -207,14 +208,13 @@ def _usual_spacing(samples: MotorSamples) -> float:
     return float(np.median(spacing)) if spacing.size else 0.0
 
 
-def _piece_samples(chunk: MotorSamples) -> int:
-    """How many samples of ``chunk`` make about half DIAGNOSTICS_PERIOD_S by their usual
-    spacing (at most OUTPUT_PIECE_SAMPLES), so that the diagnostics are written about once per
-    period whatever the input rate."""
-    spacing = _usual_spacing(chunk)
-    if spacing <= 0.0:
+def _piece_samples(spacing_s: float) -> int:
+    """How many samples at the usual ``spacing_s`` make about half DIAGNOSTICS_PERIOD_S (at most
+    OUTPUT_PIECE_SAMPLES), so that the diagnostics are written about once per period whatever
+    the input rate."""
+    if spacing_s <= 0.0:
         return OUTPUT_PIECE_SAMPLES
-    return int(min(max(0.5 * DIAGNOSTICS_PERIOD_S / spacing, 1.0), OUTPUT_PIECE_SAMPLES))
+    return int(min(max(0.5 * DIAGNOSTICS_PERIOD_S / spacing_s, 1.0), OUTPUT_PIECE_SAMPLES))
 
 
 class _Output:
@@ -262,10 +262,16 @@ class _Output:
         return self._time(sec=int(sec[0]), nanosec=int(nanosec[0]))
 
     def add(
-        self, samples: MotorSamples | None, states: list[HealthState], estimator: HealthEstimator
+        self,
+        samples: MotorSamples | None,
+        states: list[HealthState],
+        estimator: HealthEstimator,
+        *,
+        spacing_s: float = 0.0,
     ) -> None:
         """Write a piece's inputs and the estimates it led to, and the diagnostics when due
-        (``samples`` None: the end, after the estimator's ``finish``).
+        (``samples`` None: the end, after the estimator's ``finish``; ``spacing_s``: the
+        samples' usual spacing, :func:`_usual_spacing` of their chunk).
 
         The diagnostics run on the inputs' clock (:attr:`HealthEstimator.input_clock_s`, the
         latest accepted sample's stamp, which a broken stamp does not move), as a node's run on
@@ -286,7 +292,7 @@ class _Output:
         if now is None or self._latest is None:
             return  # nothing accepted or estimated yet: counted when there is
         counters = estimator.counters
-        self._receive(now, self._unplaced, samples)
+        self._receive(now, self._unplaced, spacing_s)
         self._unplaced = 0
         self._diagnostics.inputs.judge(now, counters.accepted, rejected_by_reason(counters, {}))
         self._diagnostics.events.observe(now, states, counters)
@@ -307,15 +313,15 @@ class _Output:
             )
         self._diagnostics_due_s = due
 
-    def _receive(self, now_s: float, count: int, samples: MotorSamples | None) -> None:
+    def _receive(self, now_s: float, count: int, spacing_s: float) -> None:
         """The input tracker receives ``count`` messages spread evenly over the time the inputs'
-        clock advanced since it last received (at most their number at the piece's usual
-        spacing back; all at ``now_s`` if the clock did not move), in RECEIVED_BIN_S bins: the
+        clock advanced since it last received (at most their number at the usual spacing
+        ``spacing_s`` back; all at ``now_s`` if the clock did not move), in RECEIVED_BIN_S bins: the
         rate over the last second then counts what came in it."""
         previous, self._received_until_s = self._received_until_s, now_s
         if not count:
             return
-        span = _usual_spacing(samples) * count if samples is not None else 0.0
+        span = spacing_s * count
         start = now_s - span
         if previous is not None and previous <= now_s:
             start = max(previous, start)
