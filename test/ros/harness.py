@@ -164,6 +164,12 @@ class Listener:
             assert time.monotonic() < deadline, f"timed out after {timeout_s} s waiting for {what}"
             self.executor.spin_once(timeout_sec=0.02)
 
+    def health_publishers(self) -> set[bytes]:
+        """The GIDs of the ``~/health`` publishers the graph knows now (a killed node's stays
+        until its lease expires, so a count of matched publishers cannot tell a restart)."""
+        topic = f"/{self.node_name}/health"
+        return {bytes(info.endpoint_gid) for info in self.node.get_publishers_info_by_topic(topic)}
+
     def wait_matched(self, timeout_s: float = 20.0) -> None:
         """Receive until both subscriptions are matched with a publisher (what is published
         before that is not delivered: the node's publishers are volatile)."""

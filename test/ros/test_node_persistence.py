@@ -108,9 +108,17 @@ def test_kill9_restart_resumes_and_sigterm_saves(ros: None, tmp_path: Path) -> N
         )
 
         listener.health.clear()
+        killed = listener.health_publishers()
         # save_period_s: below, only the shutdown can have saved.
         with NodeProcess(tmp_path, **node_parameters, save_period_s=3600.0) as node:
             node.wait_log("resumed from")
+            # Its first estimates come 0.3 s into the play: on a loaded machine (CI, once)
+            # before the listener had found its new ~/health publisher, and were lost.
+            listener.wait_for(
+                lambda: bool(listener.health_publishers() - killed),
+                20.0,
+                "the restarted node's ~/health publisher",
+            )
             play(second, listener=listener)
             listener.wait_for(
                 lambda: len(listener.health) >= len(expected), 10.0, "estimates after restart"
