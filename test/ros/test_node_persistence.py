@@ -82,11 +82,11 @@ def test_kill9_restart_resumes_and_sigterm_saves(ros: None, tmp_path: Path) -> N
                 listener.wait_for(
                     lambda: (
                         bool(listener.health)
-                        and listener.health[-1]["stamp"] > ORIGIN_S + 3.0
+                        and listener.health[-1]["stamp"] > ORIGIN_S + 4.0
                         and state_file.exists()
                     ),
                     30.0,
-                    "3 s of estimates and a saved state",
+                    "4 s of estimates and a saved state",
                 )
                 node.process.send_signal(signal.SIGKILL)
                 node.process.wait(10)
@@ -101,6 +101,8 @@ def test_kill9_restart_resumes_and_sigterm_saves(ros: None, tmp_path: Path) -> N
         expected = [health_estimate_fields(s) for s in resumed.process(second_samples)]
         # The restored loss (plus one block of wear) holds seconds of wear, and at most one
         # save period (plus a batch and the timer's jitter) of wear was lost by the kill.
+        # (The kill comes 4 s in, not 3: with both cores busy the save before a kill at 3 s
+        # held 1.99 s of wear once, the load ramp's first 0.55 s wearing little.)
         restored_um = expected[0]["precision_loss_um"]
         assert restored_um > 2.0 * rate_um_per_s
         assert before_kill["precision_loss_um"] - restored_um <= rate_um_per_s * (
