@@ -26,11 +26,6 @@ class Baseline:
     seconds: float
     messages: int
 
-    @property
-    def per_message_s(self) -> float:
-        """Seconds per message (0 for an empty topic)."""
-        return self.seconds / self.messages if self.messages else 0.0
-
 
 def decode_baseline(path: str | Path, topic: str = MOTOR_STATE_TOPIC) -> Baseline:
     """Time rosbags opening the bag and deserialising every message of ``topic`` (one run).
