@@ -13,19 +13,25 @@ docs/estimation.md explains the model, what is observable and each option.
 from __future__ import annotations
 
 import dataclasses
-import hashlib
 import math
 from collections import deque
 from typing import Any
 
 import numpy as np
 
-from prsm_health.estimation.degradation import Degradation, DegradationIntegrator
+from prsm_health.estimation.degradation import DegradationIntegrator
 from prsm_health.estimation.estimate import EstimateEvent, HealthState
 from prsm_health.estimation.hypotheses import JamHypotheses, StepResult
 from prsm_health.estimation.inputs import Block, InputCounters, SampleBlocker, merge_blocks
 from prsm_health.estimation.measurement import LOAD, TorqueModel
 from prsm_health.estimation.params import MIN_BLOCKS_FOR_DIVERGENCE, EstimatorParams
+from prsm_health.estimation.snapshot import (
+    SNAPSHOT_FORMAT,
+    actuator_fingerprint,
+    actuator_parts,
+    read_snapshot,
+    screw_fingerprint,
+)
 from prsm_health.estimation.surrogate import physics_averages
 from prsm_health.physics.friction import efficiency
 from prsm_health.physics.load_distribution import radial_capacity_ratio
@@ -41,79 +47,6 @@ HOLE_BLOCKS = 3.0
 #: After a hole, jam evidence is not used for this long, while the load is found again: a
 #: load that changed inside the hole would otherwise look like a jam.
 REACQUIRE_S = 0.25
-
-#: Version of the :meth:`HealthEstimator.snapshot` layout.
-SNAPSHOT_FORMAT = 2
-#: A restored state's means and covariances must stay below this in magnitude. No state the
-#: filter reaches comes near it (predictions are capped at one second); a larger one is a
-#: damaged file, and it would overflow once symmetrised.
-SNAPSHOT_LARGEST_VALUE = 1e100
-#: A restored sample counter must stay below this: the messages carry the counts as uint64
-#: (accepted plus rejected, and the counts that follow). 2^62 samples at 1 kHz are 146 My.
-SNAPSHOT_LARGEST_COUNT = 2**62
-
-
-class SnapshotError(ValueError):
-    """A saved estimator state cannot be resumed (malformed, or of another screw)."""
-
-
-class ForeignStateError(SnapshotError):
-    """A well-formed saved state of another screw (or actuator): not damaged, only not this
-    one's, so it can resume once the parameters match again."""
-
-
-def _digest(parts: tuple[object, ...]) -> str:
-    return hashlib.sha256(repr(parts).encode()).hexdigest()[:16]
-
-
-def screw_fingerprint(params: EstimatorParams) -> str:
-    """A stable digest of the screw itself (geometry, materials, friction, wear, fatigue):
-    what the accumulated degradation and the jammed rollers belong to."""
-    preset = params.actuator.preset
-    return _digest((preset.geometry, preset.friction, preset.wear, preset.fatigue))
-
-
-def actuator_fingerprint(params: EstimatorParams) -> str:
-    """A stable digest of what the filters' states depend on: the screw, the drive train, the
-    misalignment and whether there are ripple states (the same digest as in the state files
-    saved before :func:`screw_fingerprint` existed, so that they still resume)."""
-    actuator, preset = params.actuator, params.actuator.preset
-    return _digest(
-        (
-            preset.geometry,
-            preset.friction,
-            preset.wear,
-            preset.fatigue,
-            actuator.drive_train,
-            actuator.misalignment,
-            params.radial_terms,
-        )
-    )
-
-
-def actuator_parts(params: EstimatorParams) -> dict[str, str]:
-    """A digest of each part of :func:`actuator_fingerprint` beyond the screw, by the name a
-    message gives it: saved with a state, so that a restore can say which of them changed."""
-    actuator = params.actuator
-    return {
-        "drive train": _digest((actuator.drive_train,)),
-        "misalignment": _digest((actuator.misalignment,)),
-        "ripple states": "on" if params.radial_terms else "off",
-    }
-
-
-#: What a partial restore names when the state file does not say which part changed (saved
-#: before the parts were).
-SOME_PART = "drive train, misalignment or ripple states"
-
-
-def _changed_parts(saved: object, params: EstimatorParams) -> tuple[str, ...]:
-    """The parts of :func:`actuator_parts` whose digest differs from the ``saved`` ones (a
-    snapshot's "parts"), or (SOME_PART,) when the snapshot does not say."""
-    if not isinstance(saved, dict):
-        return (SOME_PART,)
-    parts = actuator_parts(params).items()
-    return tuple(name for name, digest in parts if saved.get(name) != digest) or (SOME_PART,)
 
 
 class HealthEstimator:
@@ -217,88 +150,27 @@ class HealthEstimator:
             when the filters' states were resumed too, else only the screw's part was.
 
         Raises:
-            SnapshotError: the snapshot is malformed or of another screw (nothing is changed
+            SnapshotError: the snapshot is malformed or of another screw, named by
+                :func:`~prsm_health.estimation.snapshot.read_snapshot` (nothing is changed
                 then).
         """
-        try:
-            if snapshot["format"] != SNAPSHOT_FORMAT:
-                raise SnapshotError(f"format {snapshot['format']!r}, expected {SNAPSHOT_FORMAT}")
-            whole = bool(snapshot["actuator"] == actuator_fingerprint(self.params))
-            # Said once the rest is known sound: a damaged file is no other actuator's.
-            foreign = None
-            if not whole and "screw" not in snapshot:  # saved before the screw's own digest
-                foreign = (
-                    "the state belongs to another actuator (the preset or the drive train "
-                    "differ; the state does not say which): refusing to resume from it"
-                )
-            elif not whole and snapshot["screw"] != screw_fingerprint(self.params):
-                foreign = (
-                    "the state belongs to another screw (the preset's geometry, materials, "
-                    "friction, wear or fatigue differ): refusing to resume from it"
-                )
-            dim = self._model.dim
-            states = []
-            for entry in snapshot["hypotheses"]:
-                k = int(entry["count"])
-                x = np.asarray(entry["x"], dtype=np.float64)
-                p = np.asarray(entry["P"], dtype=np.float64)
-                saved = entry["log_probability"]
-                log_probability = -math.inf if saved is None else float(saved)
-                # Optional: a state saved before the ripple axis existed learns it again.
-                axis = entry.get("ripple_axis")
-                if axis is not None:
-                    axis = np.asarray(axis, dtype=np.float64)
-                    if axis.shape != (2,) or not abs(float(axis @ axis) - 1.0) < 1e-9:
-                        raise SnapshotError(f"hypothesis {k}: ripple_axis is not a unit 2-vector")
-                filter_state_ok = (  # not used when the filters start afresh
-                    x.shape == (dim,)
-                    and p.shape == (dim, dim)
-                    and np.all(np.abs(x) < SNAPSHOT_LARGEST_VALUE)  # NaN fails too
-                    and np.all(np.abs(p) < SNAPSHOT_LARGEST_VALUE)
-                )
-                valid = (
-                    k >= 0
-                    and (k <= self._bank.n_rollers or foreign is not None)  # another's rollers
-                    and (filter_state_ok or not whole)
-                    and (saved is None or -math.inf < log_probability <= 0.0)
-                )
-                if not valid:
-                    raise SnapshotError(f"hypothesis {k} is malformed")
-                states.append((k, bool(entry["fresh"]), x, p, log_probability, axis))
-            degradation = Degradation(**{k: float(v) for k, v in snapshot["degradation"].items()})
-            accepted = int(snapshot["samples_accepted"])
-            rejected = [int(v) for v in snapshot["samples_rejected"]]
-        except SnapshotError:
-            raise  # it says what is wrong
-        except (KeyError, TypeError, ValueError, AttributeError) as exc:
-            raise SnapshotError(f"malformed state: {exc!r}") from exc
-        if not any(math.isfinite(state[4]) for state in states):
-            raise SnapshotError("no hypothesis with a probability above zero")
-        # Losses, damages, their error terms and the rate only ever grow from zero.
-        if not all(0.0 <= v < SNAPSHOT_LARGEST_VALUE for v in degradation.to_dict().values()):
-            raise SnapshotError(
-                f"degradation values must be >= 0 and < {SNAPSHOT_LARGEST_VALUE:g}: {degradation}"
-            )
-        counts = [accepted, *rejected]
-        if len(rejected) != len(self.counters.rejected) or not all(
-            0 <= n < SNAPSHOT_LARGEST_COUNT for n in counts
-        ):
-            raise SnapshotError(
-                f"sample counters: {len(self.counters.rejected)} rejection reasons expected, "
-                f"each count in [0, 2^62), got {len(rejected)} reasons, counts {counts}"
-            )
-        if foreign is not None:
-            raise ForeignStateError(foreign)
-        if whole:
-            self._bank.restore(states)
+        saved = read_snapshot(
+            snapshot,
+            self.params,
+            state_dim=self._model.dim,
+            n_rollers=self._bank.n_rollers,
+            rejection_reasons=len(self.counters.rejected),
+        )
+        if saved.changed_parts:
+            self._bank.restart_filters([(h[0], h[4]) for h in saved.hypotheses])
         else:
-            self._bank.restart_filters([(state[0], state[4]) for state in states])
-        self._degradation.state = degradation
-        self.counters.accepted = accepted
-        self.counters.rejected = rejected
+            self._bank.restore(saved.hypotheses)
+        self._degradation.state = saved.degradation
+        self.counters.accepted = saved.samples_accepted
+        self.counters.rejected = saved.samples_rejected
         self._resumed = True
         self._last = None
-        return () if whole else _changed_parts(snapshot.get("parts"), self.params)
+        return saved.changed_parts
 
     def reset_after_maintenance(
         self, jammed_rollers: int, *, reset_precision_loss: bool, reset_fatigue_damage: bool

@@ -81,6 +81,7 @@ from prsm_health.estimation.measurement import (
 )
 from prsm_health.estimation.params import EstimatorParams
 from prsm_health.estimation.phasor import PolarPhasor, polar_about
+from prsm_health.estimation.snapshot import SavedHypothesis
 
 FloatArray = NDArray[np.float64]
 Filter = Any  # filterpy filters carry no type information
@@ -673,9 +674,7 @@ class JamHypotheses:
         self.hypotheses = kept
         self._normalise()
 
-    def restore(
-        self, states: list[tuple[int, bool, FloatArray, FloatArray, float, FloatArray | None]]
-    ) -> None:
+    def restore(self, states: list[SavedHypothesis]) -> None:
         """Replace the hypotheses by saved ones: (count, fresh, x, P, log probability, ripple
         axis)."""
         self.hypotheses = [

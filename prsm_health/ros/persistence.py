@@ -40,7 +40,8 @@ from pathlib import Path
 from typing import Any
 
 from prsm_health.estimation.estimate import EstimateEvent, HealthState
-from prsm_health.estimation.estimator import ForeignStateError, HealthEstimator, SnapshotError
+from prsm_health.estimation.estimator import HealthEstimator
+from prsm_health.estimation.snapshot import ForeignStateError, SnapshotError
 
 FORMAT = "prsm_health.state/1"
 #: Suffixes of a state file kept aside: damaged, or a sound state of another actuator (another

@@ -11,13 +11,9 @@ import numpy as np
 import pytest
 
 from prsm_health.actuator import Actuator
-from prsm_health.estimation.estimator import (
-    SOME_PART,
-    ForeignStateError,
-    HealthEstimator,
-    SnapshotError,
-)
+from prsm_health.estimation.estimator import HealthEstimator
 from prsm_health.estimation.params import EstimatorParams, Fidelity
+from prsm_health.estimation.snapshot import SOME_PART, ForeignStateError, SnapshotError
 from prsm_health.physics.presets import load_preset
 from prsm_health.signals import MotorSamples
 
