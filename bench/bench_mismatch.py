@@ -111,7 +111,7 @@ def main() -> None:
             onsets += len(metrics.jams)
             false += metrics.false_jam_declarations
             false_s += metrics.false_jam_seconds
-            consistent += metrics.load_nees_consistent
+            consistent += metrics.load_nees_consistent is True
             if name == NOMINAL:
                 nominal = metrics.load_rmse_percent_rated
                 nominal_nees = metrics.load_nees_mean

@@ -267,7 +267,7 @@ def _false_jams(runs: Sequence[Run]) -> tuple[str, bool]:
 
 
 def _nees(runs: Sequence[ScoredRun]) -> tuple[str, bool]:
-    failed = [r.scene for r in runs if not r.metrics.load_nees_consistent]
+    failed = [r.scene for r in runs if r.metrics.load_nees_consistent is not True]
     listed = f"; not: {', '.join(failed)}" if failed else ""
     return f"{len(runs) - len(failed)}/{len(runs)} consistent{listed}", not failed
 
@@ -496,7 +496,7 @@ def _summary(results: BenchResults, common: dict[str, list[Run]]) -> list[str]:
                 f"{1e6 * chunked / samples:,.1f}",
                 f"{pooled_rmse_percent(runs):.2f}",
                 f"{max(m.load_max_error_n for m in metrics) / 1e3:.1f}",
-                f"{sum(m.load_nees_consistent for m in metrics)}/{len(metrics)}",
+                f"{sum(m.load_nees_consistent is True for m in metrics)}/{len(metrics)}",
                 f"{sum(o.within_cycle for o in onsets)}/{len(onsets)}",
                 str(sum(m.false_jam_declarations for m in metrics)),
                 f"{np.nanmean([abs(m.precision_loss_error_percent) for m in metrics]):.1f}",
@@ -533,7 +533,7 @@ RUN_COLUMNS: dict[str, Callable[[Run], str]] = {
     "RMSE %": lambda r: f"{r.rmse_percent_largest:.3f}",
     "max err kN": lambda r: f"{r.metrics.load_max_error_n / 1e3:.2f}",
     "NEES": lambda r: (
-        f"{r.metrics.load_nees_mean:.2f}{'' if r.metrics.load_nees_consistent else ' (x)'}"
+        f"{r.metrics.load_nees_mean:.2f}{'' if r.metrics.load_nees_consistent is True else ' (x)'}"
     ),
     "jam delays": lambda r: ", ".join(_delay(j.delay_s) for j in r.metrics.jams) or "-",
     "false jams": lambda r: str(r.metrics.false_jam_declarations),

@@ -354,10 +354,14 @@ def summary(bag: Path, source: str, result: ReplayResult) -> str:
             if math.isfinite(metrics.precision_loss_error_percent)
             else "no precision loss in the truth to compare"
         )
+        nees = {
+            True: f"NEES {metrics.load_nees_mean:.2f} (consistent)",
+            False: f"NEES {metrics.load_nees_mean:.2f} (NOT consistent)",
+            None: "no NEES (no load of 5 % of rated in motion)",
+        }[metrics.load_nees_consistent]
         load = (
             f"load RMSE {metrics.load_rmse_percent_rated:.2f} % of rated "
-            f"(max {metrics.load_max_error_n:.0f} N), NEES {metrics.load_nees_mean:.2f} "
-            f"({'consistent' if metrics.load_nees_consistent else 'NOT consistent'})"
+            f"(max {metrics.load_max_error_n:.0f} N), {nees}"
             if math.isfinite(metrics.load_rmse_percent_rated)
             else "no load estimate in motion to score"
         )

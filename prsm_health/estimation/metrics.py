@@ -99,7 +99,8 @@ class Metrics:
     load_max_error_n: float
     load_nees_mean: float
     load_nees_interval: tuple[float, float]
-    load_nees_consistent: bool
+    #: None when no estimate was loaded and moving (nothing to test), as the mean is NaN.
+    load_nees_consistent: bool | None
     load_standstill_rmse_n: float
     load_standstill_max_error_n: float
     load_standstill_coverage_2sigma: float
@@ -217,7 +218,7 @@ def _nothing_scored(beyond: int, offsets: tuple[float, ...]) -> Metrics:
         estimates=0,
         moving_estimates=0,
         load_nees_interval=(math.nan, math.nan),
-        load_nees_consistent=False,
+        load_nees_consistent=None,
         jams=(),
         false_jam_declarations=0,
         false_jam_seconds=0.0,
@@ -311,10 +312,13 @@ def _time_lines(states: list[HealthState]) -> tuple[list[slice], float]:
     return lines, moving
 
 
-def _nees_test(stamps: FloatArray, nees: FloatArray) -> tuple[float, tuple[float, float], bool]:
-    """Mean NEES of one estimate per second and its 95 % chi-square interval."""
+def _nees_test(
+    stamps: FloatArray, nees: FloatArray
+) -> tuple[float, tuple[float, float], bool | None]:
+    """Mean NEES of one estimate per second, its 95 % chi-square interval and whether it lies
+    inside (NaN and None without a value to test)."""
     if nees.size == 0:
-        return math.nan, (math.nan, math.nan), False
+        return math.nan, (math.nan, math.nan), None
     seconds = np.floor(stamps - stamps[0]).astype(np.int64)
     first = np.flatnonzero(np.r_[True, seconds[1:] != seconds[:-1]])
     thinned = nees[first]

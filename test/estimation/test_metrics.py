@@ -252,3 +252,15 @@ def test_estimates_beyond_the_truths_end_are_not_scored() -> None:
     outside = score(states[-5:], true, rated_load_n=55e3, largest_screw_speed_rad_s=73.3)
     assert (outside.estimates, outside.estimates_beyond_truth, outside.jams) == (0, 5, ())
     assert math.isnan(outside.load_rmse_n) and outside.to_dict()["load_rmse_n"] is None
+    assert outside.load_nees_consistent is None
+
+
+def test_a_run_without_load_in_motion_has_no_nees_verdict() -> None:
+    """Moving at 20 kN scored against a rated load of 500 kN: below the NEES test's 5 %, so
+    the load is scored but its NEES is not tested (None, null in JSON), not failed."""
+    stamps = np.arange(0.02, 20.0, 0.04)
+    states = [state(float(t), 20e3, 100.0, 0, 1e-6 * float(t)) for t in stamps]
+    metrics = score(states, truth(20.0, None), rated_load_n=500e3, largest_screw_speed_rad_s=73.3)
+    assert metrics.load_rmse_n == pytest.approx(0.0, abs=1e-9)
+    assert math.isnan(metrics.load_nees_mean) and metrics.load_nees_consistent is None
+    assert metrics.to_dict()["load_nees_consistent"] is None
