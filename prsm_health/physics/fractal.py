@@ -263,7 +263,8 @@ def _area_table(surface: FractalSurface) -> _AreaTable:
 
 
 def real_contact_area_m2(surface: FractalSurface, load_n: ArrayLike) -> FloatArray:
-    """Real contact area A_r of ellipses carrying normal forces Q, any shape (001 eq. 15-24).
+    """Real contact area A_r of ellipses carrying normal forces Q, any shape (001 eq. 12-22,
+    integrated exactly rather than through eq. 23-24's dimensionless closed form).
 
     Fully plastic loads (a_L <= a_pc) give A_r = Q / H exactly; above, log-log interpolation in
     the cached monotone table. Q must be finite, >= 0 and at most LARGEST_TABLE_LOAD_N.

@@ -34,7 +34,10 @@ Assumptions that paper 002 leaves open:
   the rolling (circumferential) direction. (With R read as the radius, k and the viscous
   torque would be 2^-0.348 = 0.79 times these.) In eq. 4, R is read as the ball radius (a / R,
   semi-axis over radius); read as d_W the differential term would be a quarter of this, below
-  1e-4 of the torque either way.
+  1e-4 of the torque either way. 002 Table 1 lists f_m = 0.75 (and f_k = 43 N^(2/3)/mm), not
+  defined in its text; if f_m were this f (a curved flank the Hertz model does not have),
+  eq. 4's factor would be 0.69 instead of 1/4 and eq. 6's k three times ours (the viscous
+  torque 1.47 times).
 - Eq. 2 (hysteresis): B m_b a is read as b_roll / 2, half the contact semi-axis along the
   rolling direction, i.e. Johnson's rolling resistance of an elliptic contact, moment
   (3/16) gamma Q b_roll; its dissipated power is that moment times v / R_X.
@@ -191,7 +194,8 @@ def _interface_terms(
 
 @cache
 def _coefficients(geometry: Geometry, params: FrictionParameters) -> _Coefficients:
-    """Both interfaces' coefficients, computed once per (geometry, parameters)."""
+    """Both interfaces' coefficients of 002 eq. 2-10, computed once per (geometry,
+    parameters); the nut's at the contact radius r_s + 2 r_r (002 eq. 4, 16)."""
     contacts = thread_contacts(geometry)
     nut_contact_radius = geometry.carrier_radius_m + geometry.roller_radius_m
     screw = _interface_terms(geometry, params, contacts.screw_roller, geometry.screw_radius_m, 1.0)

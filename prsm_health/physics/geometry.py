@@ -106,8 +106,9 @@ def require_finite_positive(obj: object, prefix: str) -> None:
 class Material:
     """Linear-elastic material with the hardness used by wear and fractal contact.
 
-    Defaults are GCr15 bearing steel (papers 001 Table 1, 004 Table 1): E = 212 GPa, nu = 0.29,
-    HRC 60 (about 697 HV, so H = 6.84 GPa), yield strength 1.7 GPa (paper 002, section 3.2).
+    Defaults are GCr15 bearing steel: E = 212 GPa (004 Table 1), nu = 0.29 (001 and 004
+    Table 1), HRC 60 (about 697 HV, so H = 6.84 GPa; our choice within 004's 56-62, 001 gives
+    62), yield strength 1.7 GPa (paper 002, section 3.2).
     """
 
     youngs_modulus_pa: float = 2.12e11
@@ -121,12 +122,13 @@ class Material:
 
     @property
     def compliance_per_pa(self) -> float:
-        """(1 - nu^2) / E, this body's share of the Hertz contact compliance."""
+        """(1 - nu^2) / E, this body's share of the Hertz contact compliance (001 eq. 9, 004
+        eq. 20)."""
         return (1.0 - self.poisson_ratio**2) / self.youngs_modulus_pa
 
     @property
     def shear_modulus_pa(self) -> float:
-        """G = E / (2 (1 + nu))."""
+        """G = E / (2 (1 + nu)), the shear modulus of the torsion error (000 eq. 2)."""
         return self.youngs_modulus_pa / (2.0 * (1.0 + self.poisson_ratio))
 
 
@@ -218,7 +220,7 @@ class Geometry:
     # --- derived quantities -------------------------------------------------------------
     @property
     def carrier_radius_m(self) -> float:
-        """Distance from the screw axis to a roller axis, r_s + r_r."""
+        """Distance from the screw axis to a roller axis, r_s + r_r (004 eq. 24, 30)."""
         return self.screw_radius_m + self.roller_radius_m
 
     @property

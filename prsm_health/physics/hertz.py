@@ -59,7 +59,8 @@ class ContactPair:
     curvature_sum_per_m: sum of the four principal curvatures, Sum rho.
     curvature_difference: F(rho).
     kappa: ellipticity a/b; a_star, b_star, delta_star: dimensionless Harris coefficients
-    (the m_a, m_b of papers 001 eq. 36 and 004 eq. 26 are a_star, b_star).
+    (the m_a, m_b of papers 001 eq. 36 and 004 eq. 26 are a_star, b_star; 001 eq. 36 prints
+    E_0 where the compliance 1/E_0 belongs, 004 eq. 20 has it right).
     compliance_per_pa: (1 - nu1^2)/E1 + (1 - nu2^2)/E2.
     """
 
@@ -75,7 +76,8 @@ class ContactPair:
 
     @property
     def _size_per_n(self) -> float:
-        """(3 eta / (2 Sum rho)), the load-independent factor of the semi-axes cubed."""
+        """(3 eta / (2 Sum rho)), the load-independent factor of the semi-axes cubed (004 eq.
+        26, Harris eq. 6.39-6.40)."""
         return 3.0 * self.compliance_per_pa / (2.0 * self.curvature_sum_per_m)
 
     @property
@@ -91,17 +93,19 @@ class ContactPair:
         return self.a_star * scale, self.b_star * scale
 
     def approach_m(self, normal_load_n: ArrayLike) -> FloatArray:
-        """Normal approach delta = K_h Q^(2/3)."""
+        """Normal approach delta = K_h Q^(2/3) (004 eq. 19)."""
         load = np.maximum(np.asarray(normal_load_n, dtype=float), 0.0)
         return np.asarray(self.deflection_constant * np.cbrt(load) ** 2, dtype=np.float64)
 
     def load_n(self, approach_m: ArrayLike) -> FloatArray:
-        """Normal load Q = (max(delta, 0) / K_h)^(3/2): smooth through loss of contact."""
+        """Normal load Q = (max(delta, 0) / K_h)^(3/2), 004 eq. 19 inverted: smooth through loss
+        of contact."""
         approach = np.maximum(np.asarray(approach_m, dtype=float), 0.0)
         return np.asarray((approach / self.deflection_constant) ** 1.5, dtype=np.float64)
 
     def max_pressure_pa(self, normal_load_n: ArrayLike) -> FloatArray:
-        """p_max = 3 Q / (2 pi a b); 0 where the contact is unloaded."""
+        """p_max = 3 Q / (2 pi a b), the peak of 002 eq. 3's Hertz pressure (the stress of 000
+        eq. 29's fatigue ratio); 0 where the contact is unloaded."""
         load = np.maximum(np.asarray(normal_load_n, dtype=float), 0.0)
         a, b = self.semi_axes_m(load)
         area = np.where(load > 0.0, a * b, 1.0)
@@ -114,7 +118,9 @@ def make_contact_pair(
     material1: Material,
     material2: Material,
 ) -> ContactPair:
-    """Hertz constants for two bodies given their principal curvatures (convex positive)."""
+    """Hertz constants for two bodies given their principal curvatures (convex positive): the
+    curvature sum and difference of 004 eq. 23-25, the ellipticity and the coefficients a*,
+    b*, delta* of 004 eq. 20 and 26 (Harris eq. 6.26-6.43), the compliance of 001 eq. 9."""
     (r11, r12), (r21, r22) = curvatures_body1, curvatures_body2
     total = r11 + r12 + r21 + r22
     if not total > 0.0:

@@ -4,11 +4,15 @@ Model (papers 000 eq. 7-25 and 004 eq. 14-22, written as one nonlinear system):
 
 * Every roller i is a chain of n_threads nodes j (j = 0 is the loaded end). Screw, roller and
   nut segments between adjacent threads are axial springs of one pitch: the screw and nut
-  shares are E A / (N p) per roller (004 eq. 16-17), the roller E A_r / p (004 writes 2p for the
-  roller segment; one thread pitch is the physical length, docs/physics.md). In loading case 1
-  (screw in tension / nut in compression, 000 eq. 13; the 004 set-up) the screw load and the
-  nut reaction enter at the same end, which gives a monotone distribution; in case 2 (both in
-  compression, 000 eq. 21) they enter at opposite ends (U-shaped distribution).
+  shares are E A / (N p) per roller (004 eq. 16-17: their sections carry the loads of all N
+  rollers; 000 eq. 17 writes p / (2 E A) per roller, 2N times stiffer, which we do not
+  follow), the roller E A_r / p (004 writes 2p for the roller segment; one thread pitch is the
+  physical length, docs/physics.md). In loading case 1 (screw in tension / nut in
+  compression, 000 eq. 13; the 004 set-up) the screw load and the nut reaction enter at the
+  same end; in case 2 (both in compression, 000 eq. 21) they enter at opposite ends. j counts
+  from the screw's loaded end in both cases (000 eq. 21 numbers case 2 from the nut's, from 1:
+  its thread j is our z - j). On every preset the loads fall along j in both cases, in case 2
+  a little less (the far end carries more).
 * With ``elastic_errors`` the screw segments of case 1 also twist under the driving torque
   T = F L / (2 pi eta) (000 eq. 2-5): the twist of a segment advances the thread by
   theta L / (2 pi), an extra axial compliance N p L^2 / (4 pi^2 eta G J) per roller share.
@@ -108,7 +112,9 @@ class _ChainMatrices:
 
 @cache
 def _chain_matrices(geometry: Geometry, case: LoadingCase, elastic_errors: bool) -> _ChainMatrices:
-    """Influence matrices of the chain (node displacements from cumulative segment forces).
+    """Influence matrices of the chain (node displacements from cumulative segment forces):
+    the axial springs of 004 eq. 16-17 with the torsion of 000 eq. 2-5, loaded as 000 eq. 13
+    (case 1) or eq. 21 (case 2).
 
     With the thread index j from the loaded end, the screw node displacement relative to
     node 0 is -sum_{k<j} (F - S_k) / k_s with S_k the transferred force, which gives
@@ -341,7 +347,9 @@ def _newton(
     max_iterations: int,
     start: _State | None = None,
 ) -> _Solved:
-    """Damped Newton on the whole system from ``start`` (or a uniform-load guess)."""
+    """Damped Newton on the whole system from ``start`` (or a uniform-load guess): contact
+    compatibility (004 eq. 19, 21-22; 000 eq. 9), each roller's axial equilibrium and the
+    screw's axial and radial equilibrium (000 eq. 12), as the module docstring says."""
     contacts = thread_contacts(geometry)
     k_sr = contacts.screw_roller.deflection_constant
     k_rn = contacts.roller_nut.deflection_constant

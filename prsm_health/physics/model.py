@@ -64,7 +64,9 @@ class ModelResult:
 
 
 def evaluate(preset: Preset, point: OperatingPoint) -> ModelResult:
-    """Run the whole physics chain of the papers for ``point`` on ``preset``."""
+    """Run the whole physics chain of the papers for ``point`` on ``preset``: the load
+    distribution (000 eq. 7-25, 004 eq. 14-22), friction and efficiency (002 eq. 2-19), wear
+    and precision loss (004 eq. 33-35 or 001 eq. 32-38) and fatigue life (000 eq. 29)."""
     geometry = preset.geometry
     if point.jammed_rollers > geometry.n_rollers:
         raise ParameterError("jammed_rollers", f"must be <= n_rollers = {geometry.n_rollers}")

@@ -110,7 +110,9 @@ class RollerValues:
         return np.asarray(np.where(jammed, self.jammed_torque_nm, healthy), dtype=np.float64)
 
     def wear_rate_m_per_s(self, screw_speed_rad_s: ArrayLike, jammed: ArrayLike) -> FloatArray:
-        """Each roller's precision-loss rate [m/s] at ``screw_speed_rad_s`` (shape as above)."""
+        """Each roller's precision-loss rate [m/s] at ``screw_speed_rad_s`` (shape as above):
+        the wear per radian of the screw tabulated from 004 eq. 33-35 / 001 eq. 32-38 (a
+        jammed roller's with its full slip speed, meshing.py) times the speed."""
         per_rad = np.where(jammed, self.jammed_wear_m_per_rad, self.wear_m_per_rad)
         speed = np.abs(np.asarray(screw_speed_rad_s, dtype=np.float64))
         return np.asarray(per_rad * speed, dtype=np.float64)

@@ -3,7 +3,8 @@
 Both papers wear only the screw-roller interface (it slides; the roller-nut interface rolls).
 Per contact (roller i, thread j) with normal force Q, Hertz semi-axes a, b and slip speed v:
 
-* ``"archard"`` (default), modified Archard of paper 004 eq. 33-34:
+* ``"archard"``, modified Archard of paper 004 eq. 33-34 (the default of a preset whose
+  ``wear`` section says nothing is ``"fractal"``, parameters.WearParameters):
   dh/dt = K Q b sin(lambda) v / (pi a b H L_S0) = K Q sin(lambda) v / (pi a H L_S0).
 * ``"fractal"``, paper 001 eq. 32-35 and 38 with the fractal real area A_r of
   :mod:`prsm_health.physics.fractal`: dh/dt = K_w^E K_w A_r v / A_n with the effective wear
@@ -15,7 +16,8 @@ The precision-loss rate is the sum of dh/dt over all threads of all rollers (004
 
 Assumptions (the papers leave these open):
 
-* 004's L_S0 and lambda are the roller lead P_r (= pitch, single-start roller) and the roller
+* 004's L_S0 ("length of the abraded areas of the screw" in its nomenclature, which gives no
+  value) and lambda are the roller lead P_r (= pitch, single-start roller) and the roller
   helix angle lambda_r, so 004's factor b sin(lambda) / L_S0 is exactly 001's effective wear
   coefficient K_w^E (eq. 33; same authors). The two models then differ only in the wear
   term: K Q / H (Archard) against K_w A_r (fractal). Reading L_S0 as 004's 100 mm stroke
