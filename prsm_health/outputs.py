@@ -110,7 +110,9 @@ class InputHealth:
     case, plus the caller's own, e.g. ``joint_missing``). recent_rejected_fraction: share of
     the samples judged over the last second that were rejected; recent_rejected: those, by
     reason. topic: the input topic (empty if unknown): the stale message names it while no
-    input came (a wrong input_topic shows there).
+    input came (a wrong input_topic shows there). last_accepted_s: when the estimator last
+    accepted a sample, on the same clock (None before the first): while messages come but
+    every sample is rejected (a stuck or dead sensor), the estimates stop.
     """
 
     rate_hz: float
@@ -121,6 +123,7 @@ class InputHealth:
     recent_rejected_fraction: float = 0.0
     recent_rejected: Mapping[str, int] = field(default_factory=dict)
     topic: str = ""
+    last_accepted_s: float | None = None
 
 
 @dataclass(frozen=True)
@@ -366,7 +369,9 @@ def diagnostic_statuses(
 
     ``state``: the latest estimate (None before the first). ``inputs``, ``events``: see their
     classes. ``now_s``: the caller's clock, the same as ``inputs.last_sample_s``. Every status
-    is STALE when the last input is older than ``thresholds.stale_timeout_s`` or never came.
+    is STALE when the last input is older than ``thresholds.stale_timeout_s`` or never came;
+    every status but the input health's (which says why) when input comes but the last sample
+    accepted is older than that.
     """
     events = events if events is not None else FilterEvents()
     fields: dict[str, Any] | None = None
@@ -392,13 +397,18 @@ def diagnostic_statuses(
     parts.append((FILTER_CONSISTENCY, _consistency(fields, events, now_s)))
 
     stale = None
+    timeout = thresholds.stale_timeout_s
     if inputs.last_sample_s is None:  # a wrong topic shows here: say which one is listened to
         stale = f"stale: no input yet on {inputs.topic}" if inputs.topic else "stale: no input yet"
-    elif now_s - inputs.last_sample_s > thresholds.stale_timeout_s:
+    elif now_s - inputs.last_sample_s > timeout:
         stale = f"stale: no input for {now_s - inputs.last_sample_s:.1f} s"
+    unaccepted_s = now_s - inputs.last_accepted_s if inputs.last_accepted_s is not None else 0.0
+    rejecting = stale is None and unaccepted_s > timeout
+    if rejecting:
+        stale = f"stale: no sample accepted for {unaccepted_s:.1f} s"
     statuses = []
     for name, (level, message, values) in parts:
-        if stale is not None:
+        if stale is not None and not (rejecting and name == INPUT_HEALTH):
             level, message = Level.STALE, f"{stale}; last: {message}"
         statuses.append(DiagnosticStatusData(name, level, message, hardware_id, values))
     return statuses

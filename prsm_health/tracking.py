@@ -36,15 +36,18 @@ class InputTracker:
     """Messages received and samples judged, over a sliding window of :data:`WINDOW_S`.
 
     Times are the caller's clock in seconds; if it jumps back (a looped bag's sim time), the
-    window starts again. Counts are of this run: totals an estimator brings from a restored
-    state are its starting point (:meth:`start_from`), not samples judged now. ``topic``: where
-    the inputs come from (named by the input-health status; empty if unknown).
+    window starts again, and the last receipt and acceptance count from the jump (their age is
+    unknown: no older than the jump, so that input that stops with it goes stale). Counts are of
+    this run: totals an estimator brings from a restored state are its starting point
+    (:meth:`start_from`), not samples judged now. ``topic``: where the inputs come from (named
+    by the input-health status; empty if unknown).
     """
 
     def __init__(self) -> None:
         self.topic = ""
         self._received_total = 0
         self._last_sample_s: float | None = None
+        self._last_accepted_s: float | None = None
         self._received: deque[tuple[float, int]] = deque()
         # time, newly accepted, newly rejected by reason
         self._judged: deque[tuple[float, int, dict[str, int]]] = deque()
@@ -84,6 +87,8 @@ class InputTracker:
             for reason, count in rejected.items()
             if count != self._rejected.get(reason, 0)
         }
+        if new_accepted > 0:
+            self._last_accepted_s = now_s
         if new_accepted or new_rejected:
             self._judged.append((now_s, new_accepted, new_rejected))
         self._accepted, self._rejected = accepted, dict(rejected)
@@ -97,6 +102,10 @@ class InputTracker:
 
     def health(self, now_s: float) -> InputHealth:
         """The input health at ``now_s``."""
+        if self._last_sample_s is not None and now_s < self._last_sample_s:
+            self._last_sample_s = now_s  # the clock went back (class docstring)
+        if self._last_accepted_s is not None and now_s < self._last_accepted_s:
+            self._last_accepted_s = now_s
         self._trim(now_s)
         accepted = sum(entry[1] for entry in self._judged)
         recent: Counter[str] = Counter()
@@ -115,6 +124,7 @@ class InputTracker:
             recent_rejected_fraction=sum(recent.values()) / judged if judged > 0 else 0.0,
             recent_rejected=dict(recent),
             topic=self.topic,
+            last_accepted_s=self._last_accepted_s,
         )
 
 

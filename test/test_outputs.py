@@ -214,6 +214,24 @@ def test_every_status_is_stale_without_recent_input() -> None:
     assert statuses(i=inputs(last_sample_s=NOW - 0.4), th=th)[AXIAL_LOAD][0] == Level.OK
 
 
+def test_estimates_go_stale_while_every_sample_is_rejected() -> None:
+    """Messages keep coming but none is accepted (a stuck sensor): the estimate statuses say
+    their estimate is old; the input health says why (it stayed OK, frozen, for ever)."""
+    th = DiagnosticThresholds(stale_timeout_s=0.5)
+    rejecting = inputs(
+        last_accepted_s=NOW - 6.0, recent_rejected_fraction=1.0, recent_rejected={"stuck": 1000}
+    )
+    result = statuses(i=rejecting, th=th)
+    for name, (level, message, _) in result.items():
+        if name == INPUT_HEALTH:
+            assert level == Level.WARN and "100.0 % rejected in the last second (stuck)" in message
+        else:
+            assert level == Level.STALE, name
+            assert message.startswith("stale: no sample accepted for 6.0 s; last: "), name
+    accepting = statuses(i=inputs(last_accepted_s=NOW - 0.4), th=th)
+    assert {level for level, _, _ in accepting.values()} == {Level.OK}
+
+
 def test_no_estimate_yet() -> None:
     result = diagnostic_statuses(None, inputs(), DiagnosticThresholds(), RATED_N, "left", NOW, None)
     assert [s.level for s in result[:4]] == [Level.OK] * 4

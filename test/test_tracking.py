@@ -10,7 +10,7 @@ import pytest
 from prsm_health.estimation.estimate import EstimateEvent
 from prsm_health.estimation.inputs import InputCounters, RejectReason
 from prsm_health.estimation.params import params_from_mapping
-from prsm_health.outputs import FILTER_CONSISTENCY, INPUT_HEALTH, STATUS_NAMES
+from prsm_health.outputs import FILTER_CONSISTENCY, INPUT_HEALTH, STATUS_NAMES, Level
 from prsm_health.tracking import DiagnosticsTracker, EventTracker, InputTracker, rejected_by_reason
 from test.test_outputs import state
 
@@ -65,6 +65,21 @@ def test_clock_jumping_back_restarts_the_window() -> None:
     tracker.update(10.0, 100, accepted=100, rejected={})
     tracker.update(1.0, 5, accepted=105, rejected={})
     assert tracker.health(1.0).rate_hz == pytest.approx(5.0)
+
+
+def test_input_that_stops_as_the_clock_jumps_back_goes_stale() -> None:
+    """The last input came at 10 s, then the clock reads 1 s (sim time looped back) and no
+    input comes: it counts as received at the jump, not 9 s in the future (its statuses read
+    OK, age -9 s, until the clock caught up)."""
+    tracker = DiagnosticsTracker()
+    params = params_from_mapping({"actuator": {"preset": "dong2022-downhole"}})
+    tracker.inputs.update(10.0, 100, accepted=100, rejected={})
+    assert tracker.inputs.health(1.0).last_sample_s == 1.0
+    assert tracker.inputs.health(1.0).last_accepted_s == 1.0
+    timeout = params.diagnostics.stale_timeout_s
+    later = tracker.statuses(state(), params, "left", 1.0 + timeout + 0.5)
+    assert all(s.level == Level.STALE for s in later), [(s.name, s.message) for s in later]
+    assert tracker.statuses(state(), params, "left", 1.0 + timeout / 2)[0].level == Level.OK
 
 
 def test_rejections_by_reason_include_the_callers_own() -> None:

@@ -221,6 +221,13 @@ class HealthNode(LifecycleNode):
         service.callback = guarded
 
     def _on_set_parameters(self, parameters: list[Parameter]) -> SetParametersResult:
+        if self._config is not None and any(p.name == "use_sim_time" for p in parameters):
+            # The diagnostics' clock: switched under a running node, every age would jump.
+            return SetParametersResult(
+                successful=False,
+                reason="parameter use_sim_time is applied at configure: deactivate and clean"
+                " up the node first",
+            )
         ours = [p for p in parameters if p.name in SPECS]
         for parameter in ours:
             if self._config is not None:

@@ -63,6 +63,9 @@ def test_invalid_parameters_fail_configure_by_name(ros: None, tmp_path: Path) ->
             assert listener.lifecycle_state() == "inactive"
             ok, reason = listener.set_parameter("hardware_id", "other")
             assert not ok and "applied at configure" in reason
+            # The diagnostics' clock too (it was switched: every input age jumped by decades).
+            ok, reason = listener.set_parameter("use_sim_time", True)
+            assert not ok and "use_sim_time is applied at configure" in reason
             assert listener.transition("activate")
             listener.wait_for(
                 lambda: INPUT_HEALTH in listener.statuses("bad_params"), 5.0, "diagnostics"
