@@ -41,6 +41,7 @@ from typing import Any
 
 from prsm_health.estimation.estimate import EstimateEvent, HealthState
 from prsm_health.estimation.estimator import HealthEstimator
+from prsm_health.estimation.inputs import LARGEST_STAMP_S
 from prsm_health.estimation.snapshot import ForeignStateError, SnapshotError
 
 FORMAT = "prsm_health.state/1"
@@ -121,6 +122,8 @@ class StateStore:
 
         Raises OSError only if the file exists but can neither be read nor moved aside.
         """
+        if self.path.exists() and not self.path.is_file():  # a FIFO's read would block
+            return self._keep_aside(f"state file {self.path} is not a regular file")
         try:
             text = self.path.read_text(encoding="utf-8")
         except FileNotFoundError:
@@ -142,7 +145,8 @@ class StateStore:
             return self._keep_aside(f"unusable state file {self.path}: nested too deeply")
         partly = parameters_changed(changed) if changed else ""
         try:
-            last_estimate = _estimate(document.get("last_estimate"))
+            rollers = estimator.params.actuator.preset.geometry.n_rollers
+            last_estimate = _estimate(document.get("last_estimate"), rollers)
         except SnapshotError as exc:  # only the diagnostics' copy: the state is restored
             problem = f"the last estimate of {self.path} is not used: {exc}"
             return RestoreOutcome(restored=True, problem="; ".join(filter(None, (partly, problem))))
@@ -186,10 +190,11 @@ def _estimate_document(state: HealthState | None) -> dict[str, Any] | None:
     return document if _finite_numbers(document) else None
 
 
-def _estimate(document: Any) -> HealthState | None:
+def _estimate(document: Any, n_rollers: int) -> HealthState | None:
     """The estimate of :func:`_estimate_document` (None: none saved). Raises SnapshotError
     unless it has exactly the fields of an estimate, each a finite number, and an event of
-    :class:`EstimateEvent`."""
+    :class:`EstimateEvent`, and is one an estimator of ``n_rollers`` rollers can make
+    (:func:`_impossible`)."""
     if document is None:
         return None
     try:
@@ -204,7 +209,38 @@ def _estimate(document: Any) -> HealthState | None:
         raise SnapshotError(f"malformed last estimate: {exc!r}") from exc
     if not _finite_numbers(document):
         raise SnapshotError("malformed last estimate: a value is not a finite number")
+    if problem := _impossible(state, n_rollers):
+        raise SnapshotError(f"malformed last estimate: {problem}")
     return state
+
+
+def _impossible(state: HealthState, n_rollers: int) -> str:
+    """What no estimator of ``n_rollers`` rollers reports in ``state`` (empty if nothing): the
+    diagnostics would show it (a stamp of 300 digits, a jam from probabilities [-1, 2, 0])."""
+    probabilities = state.jam_probabilities
+    if len(probabilities) != n_rollers + 1:
+        return f"{len(probabilities)} jam probabilities for {n_rollers} rollers"
+    if min(probabilities) < 0.0 or abs(sum(probabilities) - 1.0) > 1e-6:
+        return f"jam probabilities {list(probabilities)} are not a distribution"
+    if not abs(state.stamp_s) < LARGEST_STAMP_S:
+        return f"stamp {state.stamp_s:g} s beyond +-2^31 s"
+    negative = [
+        name
+        for name in (
+            "axial_load_std_n",
+            "precision_loss_m",
+            "precision_loss_std_m",
+            "fatigue_damage",
+            "fatigue_damage_std",
+            "samples_accepted",
+            "samples_rejected",
+            "nis",
+        )
+        if getattr(state, name) < 0
+    ]
+    if negative or not 0.0 <= state.efficiency <= 1.0:
+        return f"{', '.join(negative) or 'efficiency'} out of range"
+    return ""
 
 
 def _finite_numbers(document: dict[str, Any]) -> bool:

@@ -83,6 +83,13 @@ def test_the_last_estimate_is_saved_with_the_state(
         {"event": 9},
         {"unknown_field": 1.0},
         {"stamp_s": True},
+        # Values no estimator makes (accepted until a helper's review: the diagnostics then
+        # showed a stamp of 300 digits, or a possible jam from these probabilities).
+        {"stamp_s": 1e300},
+        {"jam_probabilities": [-1.0, 2.0, 0.0]},
+        {"jam_probabilities": [0.5, 0.5]},
+        {"axial_load_std_n": -1.0},
+        {"efficiency": 1.5},
     ],
 )
 def test_a_malformed_last_estimate_loses_only_itself(
@@ -110,6 +117,19 @@ def test_a_malformed_last_estimate_loses_only_itself(
 def test_missing_file_is_a_fresh_start(tmp_path: Path, params: EstimatorParams) -> None:
     outcome = StateStore(tmp_path / "none.json", "left").restore(HealthEstimator(params))
     assert not outcome.restored and outcome.kept_aside is None
+
+
+@pytest.mark.timeout(10)
+def test_a_state_file_that_is_not_a_regular_file_is_kept_aside(
+    tmp_path: Path, params: EstimatorParams
+) -> None:
+    """A FIFO at the state file's path: reading it blocked configure for ever, and the node
+    no longer answered SIGINT or SIGTERM (a helper's review)."""
+    path = tmp_path / "left.json"
+    os.mkfifo(path)
+    outcome = StateStore(path, "left").restore(HealthEstimator(params))
+    assert not outcome.restored and outcome.kept_aside is not None
+    assert "is not a regular file" in outcome.problem and not path.exists()
 
 
 @pytest.mark.parametrize(
