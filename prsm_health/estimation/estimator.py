@@ -257,9 +257,12 @@ class HealthEstimator:
             )
         return self._run(self._blocker.feed(samples))
 
-    def finish(self) -> list[HealthState]:
-        """Estimates of the samples still pending (call at the end of a bag)."""
-        states = self._run(self._blocker.flush())
+    def finish(self, *, end_of_data: bool = True) -> list[HealthState]:
+        """Estimates of the samples still pending (call at the end of a bag). ``end_of_data``
+        False: a pause (the node's input went silent), after which more may come; a last
+        sample that jumped far ahead then waits for it to be judged (a wrong stamp just before
+        a pause was accepted, and the good samples after it rejected until a time reset)."""
+        states = self._run(self._blocker.flush(end_of_data=end_of_data))
         if self._standstill:
             states.append(self._update(merge_blocks(self._standstill)))
             self._standstill.clear()

@@ -221,11 +221,12 @@ class SampleBlocker:
             begin = reset
         return blocks
 
-    def flush(self) -> list[Block]:
-        """Blocks from the samples still pending (end of a bag); a held sample is accepted,
-        nothing came to contradict it."""
+    def flush(self, *, end_of_data: bool = True) -> list[Block]:
+        """Blocks from the samples still pending. At the end of the data a held sample is
+        accepted (nothing came to contradict it); in a pause (``end_of_data`` False: a node
+        whose input went silent) it stays held, its verdict open for what comes next."""
         pending = self._pending
-        if self._held is not None:
+        if self._held is not None and end_of_data:
             pending, self._held = MotorSamples.concatenate([pending, self._held]), None
         return self._blocks(pending, final=True)
 

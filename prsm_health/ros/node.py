@@ -501,7 +501,7 @@ class HealthNode(LifecycleNode):
             states = estimator.process(samples) if len(samples) else []
             silent_s = now_s - self._input_at_steady_s
             if final or silent_s > estimator.params.diagnostics.stale_timeout_s:
-                states += estimator.finish()
+                states += estimator.finish(end_of_data=final)
             self._handle_estimates(estimator, config, states, received)
         except Exception as exc:
             self._fault("processing", exc)

@@ -232,6 +232,27 @@ def test_a_gap_after_a_flush_is_a_gap() -> None:
     assert blocker.counters.gaps == 1
 
 
+def test_a_stamp_far_ahead_just_before_a_pause_is_judged_by_what_comes_after_it() -> None:
+    """The node flushes when its input goes silent: a sample stamped far ahead just before the
+    silence stays held, and the samples after the pause reject it as out of order. (It was
+    accepted by the flush, its block estimated at that stamp, and the next 100 good samples
+    rejected until a time reset followed them.) At the end of the data it is accepted."""
+    samples = run(2.0)
+    stamps = samples.stamp_s.copy()
+    stamps[699] = LARGEST_STAMP_S - 1.0
+    faulty = MotorSamples(stamps, samples.current_a, samples.speed_rad_s, samples.position_rad)
+    blocker = SampleBlocker(PARAMS)
+    before = blocker.feed(faulty[:700]) + blocker.flush(end_of_data=False)
+    after = blocker.feed(faulty[1500:]) + blocker.flush()
+    assert blocker.counters.rejected[RejectReason.TIME_BACKWARDS] == 1
+    assert blocker.counters.accepted == 699 + 500 and blocker.counters.time_resets == 0
+    assert max(b.stamp_s for b in before + after) < stamps[-1]
+    assert after[0].after_gap and blocker.counters.gaps == 1
+    ended = SampleBlocker(PARAMS)
+    last = ended.feed(faulty[:700]) + ended.flush()
+    assert last[-1].stamp_s == LARGEST_STAMP_S - 1.0 and ended.counters.accepted == 700
+
+
 def test_standstill_and_reversal_blocks_have_no_direction() -> None:
     samples = run(1.0)
     speed = np.where(np.arange(len(samples)) < 500, 0.0, -150.0)
