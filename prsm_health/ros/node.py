@@ -645,7 +645,7 @@ def main(argv: Sequence[str] | None = None) -> int:
             file=sys.stderr,
         )
         return 2
-    with ros_session(args) as stop:
+    with ros_session(args, ignore_signals_after=True) as stop:
         node = HealthNode()
         executor = SingleThreadedExecutor()
         executor.add_node(node)

@@ -23,8 +23,17 @@ from rclpy.utilities import try_shutdown
 
 
 @contextmanager
-def ros_session(args: Sequence[str] | None = None) -> Iterator[threading.Event]:
-    """rclpy initialised with ``args`` (ROS arguments); yields the event SIGINT/SIGTERM set."""
+def ros_session(
+    args: Sequence[str] | None = None, *, ignore_signals_after: bool = False
+) -> Iterator[threading.Event]:
+    """rclpy initialised with ``args`` (ROS arguments); yields the event SIGINT/SIGTERM set.
+
+    The handlers stay until rclpy is shut down, then the previous ones come back, or, with
+    ``ignore_signals_after`` (a process that ends with the session: the node), SIGINT and
+    SIGTERM are ignored from then on. A second Ctrl-C while such a process ends (rclpy's
+    shutdown, then the interpreter's teardown, which puts back the default action of every
+    signal that has a Python handler) killed it by the signal (exit code -2), hiding its clean
+    exit or the node's 1 after a failed save; SIGKILL still ends a teardown that hangs."""
     stop = threading.Event()
 
     def request_stop(signum: int, frame: FrameType | None) -> None:
@@ -38,9 +47,11 @@ def ros_session(args: Sequence[str] | None = None) -> Iterator[threading.Event]:
     try:
         yield stop
     finally:
-        for sig, handler in previous.items():
-            signal.signal(sig, handler)
-        try_shutdown()
+        try:
+            try_shutdown()
+        finally:
+            for sig, handler in previous.items():
+                signal.signal(sig, signal.SIG_IGN if ignore_signals_after else handler)
 
 
 def message_class(type_name: str) -> Any:

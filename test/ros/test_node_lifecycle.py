@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import signal
 import subprocess
 import sys
 import time
@@ -239,3 +240,19 @@ def test_malformed_ros_arguments_are_one_line_and_exit_2(ros_args: list[str], pr
     assert result.returncode == 2, result.stderr
     assert result.stderr.startswith(f"prsm-health-node: invalid --ros-args: {problem}")
     assert result.stderr.count("\n") == 1 and "Traceback" not in result.stderr
+
+
+@pytest.mark.timeout(90)
+@pytest.mark.parametrize("second_after_s", [0.02, 0.05, 0.1])
+def test_a_second_signal_during_shutdown_keeps_the_clean_exit(
+    ros: None, tmp_path: Path, second_after_s: float
+) -> None:
+    """Ctrl-C twice: the state is saved and the node exits 0 (a second SIGINT during rclpy's
+    shutdown ended the process by the signal, exit code -2, hiding a failed save's 1)."""
+    state_file = tmp_path / "state.json"
+    with NodeProcess(tmp_path, hardware_id="twice", state_file=str(state_file)) as node:
+        node.wait_log("configured")
+        node.process.send_signal(signal.SIGINT)
+        time.sleep(second_after_s)
+        assert stop_process(node.process, signal.SIGINT) == 0, node.log()
+    assert state_file.exists()
