@@ -30,6 +30,9 @@ from typing import Any
 from prsm_health.estimation.estimate import S_PER_H, UM_PER_M, HealthState
 from prsm_health.estimation.params import DiagnosticThresholds
 
+#: Input stamps that advance more than this many times faster or slower than the node's clock
+#: are a clock in the wrong unit (ms or us read as s, a tick counter), not a bag played fast.
+STAMP_RATE_LIMIT = 100.0
 #: Seconds during which a divergence recovery, a time reset, a non-finite output or a
 #: processing error keeps the filter-consistency status at WARN or ERROR.
 RECENT_S = 10.0
@@ -112,7 +115,9 @@ class InputHealth:
     reason. topic: the input topic (empty if unknown): the stale message names it while no
     input came (a wrong input_topic shows there). last_accepted_s: when the estimator last
     accepted a sample, on the same clock (None before the first): while messages come but
-    every sample is rejected (a stuck or dead sensor), the estimates stop.
+    every sample is rejected (a stuck or dead sensor), the estimates stop. stamp_rate: seconds
+    by which the accepted samples' stamps advanced per second of the caller's clock over the
+    last second (-1: not known, e.g. in an offline replay, whose clock is the stamps).
     """
 
     rate_hz: float
@@ -124,6 +129,7 @@ class InputHealth:
     recent_rejected: Mapping[str, int] = field(default_factory=dict)
     topic: str = ""
     last_accepted_s: float | None = None
+    stamp_rate: float = -1.0
 
 
 @dataclass(frozen=True)
@@ -310,6 +316,11 @@ def _inputs(inputs: InputHealth, th: DiagnosticThresholds, now_s: float) -> _Par
     problems = []
     if inputs.rate_hz < th.min_input_rate_hz:
         problems.append(f"rate {inputs.rate_hz:.0f} Hz below {th.min_input_rate_hz:g} Hz")
+    rate = inputs.stamp_rate
+    if rate >= 0.0 and not 1.0 / STAMP_RATE_LIMIT <= rate <= STAMP_RATE_LIMIT:
+        problems.append(
+            f"stamps advance {rate:.3g} s per second received (a clock in the wrong unit?)"
+        )
     fraction = inputs.recent_rejected_fraction
     if fraction > 0.0 and fraction >= th.rejected_warn_fraction:
         reasons = ", ".join(k for k, v in inputs.recent_rejected.items() if v)
@@ -326,6 +337,7 @@ def _inputs(inputs: InputHealth, th: DiagnosticThresholds, now_s: float) -> _Par
         "accepted": inputs.accepted,
         "rejected": rejected_total,
         "recent_rejected_fraction": inputs.recent_rejected_fraction,
+        "stamp_rate": inputs.stamp_rate,
     }
     values.update({f"rejected_{reason}": count for reason, count in inputs.rejected.items()})
     return (Level.WARN if problems else Level.OK), message, _numbers(values)

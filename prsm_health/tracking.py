@@ -49,6 +49,8 @@ class InputTracker:
         self._last_sample_s: float | None = None
         self._last_accepted_s: float | None = None
         self._received: deque[tuple[float, int]] = deque()
+        # (time, the inputs' clock) where it moved: how fast the stamps advance
+        self._clock: deque[tuple[float, float]] = deque()
         # time, newly accepted, newly rejected by reason
         self._judged: deque[tuple[float, int, dict[str, int]]] = deque()
         self._accepted = self._start_accepted = 0
@@ -61,11 +63,17 @@ class InputTracker:
         self._rejected, self._start_rejected = dict(rejected), dict(rejected)
 
     def update(
-        self, now_s: float, received: int, accepted: int, rejected: Mapping[str, int]
+        self,
+        now_s: float,
+        received: int,
+        accepted: int,
+        rejected: Mapping[str, int],
+        input_clock_s: float | None = None,
     ) -> None:
-        """Record ``received`` new messages and the estimator's totals after processing them."""
+        """Record ``received`` new messages and the estimator's totals after processing them
+        (and :meth:`judge`'s ``input_clock_s``)."""
         self.receive(now_s, received)
-        self.judge(now_s, accepted, rejected)
+        self.judge(now_s, accepted, rejected, input_clock_s)
 
     def receive(self, now_s: float, received: int) -> None:
         """Record ``received`` messages that came at ``now_s`` (an offline replay spreads a
@@ -77,10 +85,24 @@ class InputTracker:
             self._last_sample_s = now_s
             self._received.append((now_s, received))
 
-    def judge(self, now_s: float, accepted: int, rejected: Mapping[str, int]) -> None:
-        """Record the estimator's totals at ``now_s``."""
+    def judge(
+        self,
+        now_s: float,
+        accepted: int,
+        rejected: Mapping[str, int],
+        input_clock_s: float | None = None,
+    ) -> None:
+        """Record the estimator's totals at ``now_s``, and where its inputs' clock is then
+        (``input_clock_s``, :attr:`HealthEstimator.input_clock_s`; None: not compared, as in an
+        offline replay, whose clock is the inputs')."""
         if self._judged and now_s < self._judged[-1][0]:
             self._judged.clear()
+        # Where the inputs' clock moves (its samples are accepted so far: the count of accepted
+        # samples moves only as blocks close, every 10,000 samples on a clock that hardly moves).
+        if input_clock_s is not None and (not self._clock or input_clock_s != self._clock[-1][1]):
+            if self._clock and (now_s < self._clock[-1][0] or input_clock_s < self._clock[-1][1]):
+                self._clock.clear()  # either clock went back: compare from here
+            self._clock.append((now_s, input_clock_s))
         new_accepted = accepted - self._accepted
         new_rejected = {
             reason: count - self._rejected.get(reason, 0)
@@ -99,6 +121,8 @@ class InputTracker:
             self._received.popleft()
         while self._judged and self._judged[0][0] <= now_s - WINDOW_S:
             self._judged.popleft()
+        while self._clock and self._clock[0][0] <= now_s - WINDOW_S:
+            self._clock.popleft()
 
     def health(self, now_s: float) -> InputHealth:
         """The input health at ``now_s``."""
@@ -112,6 +136,10 @@ class InputTracker:
         for _, _, reasons in self._judged:
             recent.update(reasons)
         judged = accepted + sum(recent.values())
+        stamp_rate = -1.0
+        if len(self._clock) >= 2 and self._clock[-1][0] - self._clock[0][0] >= WINDOW_S / 2:
+            (then, clock_then), (last, clock_last) = self._clock[0], self._clock[-1]
+            stamp_rate = (clock_last - clock_then) / (last - then)
         return InputHealth(
             rate_hz=sum(count for _, count in self._received) / WINDOW_S,
             last_sample_s=self._last_sample_s,
@@ -125,6 +153,7 @@ class InputTracker:
             recent_rejected=dict(recent),
             topic=self.topic,
             last_accepted_s=self._last_accepted_s,
+            stamp_rate=stamp_rate,
         )
 
 

@@ -184,6 +184,23 @@ def test_input_health_rate_and_rejections() -> None:
     assert "non_finite" in message
 
 
+@pytest.mark.parametrize(
+    ("stamp_rate", "warned"),
+    [(-1.0, False), (1.0, False), (20.0, False), (1e-5, True), (1e3, True)],
+)
+def test_input_stamps_on_another_clock_than_the_nodes_are_named(
+    stamp_rate: float, warned: bool
+) -> None:
+    """Stamps that advance 1e-5 s per second received (a tick counter read as seconds): no
+    block ever completed and input health read OK; 1 s a sample at 1 kHz: every sample a gap,
+    OK. A bag played 20 times as fast is no clock error; -1 is not known (an offline replay)."""
+    level, message, values = statuses(i=inputs(stamp_rate=stamp_rate))[INPUT_HEALTH]
+    assert values["stamp_rate"] == f"{stamp_rate:g}"
+    assert (level == Level.WARN) == warned
+    if warned:
+        assert f"stamps advance {stamp_rate:.3g} s per second received" in message
+
+
 def test_filter_consistency_reports_recent_problems() -> None:
     level, _, values = statuses()[FILTER_CONSISTENCY]
     assert level == Level.OK

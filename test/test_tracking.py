@@ -67,6 +67,22 @@ def test_clock_jumping_back_restarts_the_window() -> None:
     assert tracker.health(1.0).rate_hz == pytest.approx(5.0)
 
 
+def test_the_stamps_rate_against_the_callers_clock() -> None:
+    """Accepted samples whose stamps advance 1e-5 s per second: the rate over the last second;
+    unknown without the inputs' clock, with too short a span, or once either clock went back
+    (compared afresh from there)."""
+    tracker = InputTracker()
+    for i in range(101):  # every 10 ms, 10 samples accepted
+        tracker.update(i * 0.01, 10, 10 * (i + 1), {}, input_clock_s=5.0 + i * 1e-7)
+    assert tracker.health(1.0).stamp_rate == pytest.approx(1e-5)
+    tracker.update(1.01, 10, 1020, {}, input_clock_s=1.0)  # a time reset of the inputs
+    assert tracker.health(1.01).stamp_rate == -1.0
+    silent = InputTracker()
+    silent.update(0.0, 10, 10, {})
+    silent.update(0.9, 10, 20, {})
+    assert silent.health(0.9).stamp_rate == -1.0
+
+
 def test_input_that_stops_as_the_clock_jumps_back_goes_stale() -> None:
     """The last input came at 10 s, then the clock reads 1 s (sim time looped back) and no
     input comes: it counts as received at the jump, not 9 s in the future (its statuses read

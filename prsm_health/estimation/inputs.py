@@ -44,6 +44,10 @@ SPIKE_SIGMAS = 12.0
 #: This many identical consecutive current samples (while the noise should vary them) are a
 #: stuck sensor; all of them are rejected (blocks close this many samples late for it).
 STUCK_RUN_SAMPLES = 20
+#: A block holds at most this many samples (40 ms at 250 kHz, beyond any drive's rate): with
+#: stamps that hardly advance (a clock in the wrong unit) a block would never end, and the
+#: samples pending for it grew without bound (23 MB and 16 ms per node batch in a minute).
+MAX_BLOCK_SAMPLES = 10_000
 #: A block whose samples span less than this [s] has no measurable slope: its acceleration
 #: and current trend are taken as zero (a speed step over a vanishing span would overflow).
 SHORTEST_SLOPE_SPAN_S = 1e-6
@@ -378,6 +382,11 @@ class SampleBlocker:
         line = np.cumsum(gap_before)
         cells = np.floor((t - anchors) / period).astype(np.int64)
         new_cell = np.r_[True, (cells[1:] != cells[:-1]) | (line[1:] != line[:-1])]
+        # A longer cell is split every MAX_BLOCK_SAMPLES from its first sample (the pending
+        # samples start at a cell's first, so the split does not depend on the chunks).
+        index = np.arange(len(t))
+        since_start = index - np.maximum.accumulate(np.where(new_cell, index, 0))
+        new_cell |= since_start % MAX_BLOCK_SAMPLES == 0
         starts = np.flatnonzero(new_cell)
         if final:
             complete = len(starts)
@@ -404,6 +413,8 @@ class SampleBlocker:
         last = len(t) - STUCK_RUN_SAMPLES
         if last < 1:
             return True
+        if last >= MAX_BLOCK_SAMPLES:
+            return False
         first_t, last_t = float(t[0]), float(t[last])
         if not 0.0 <= last_t - first_t <= self._params.filter.max_gap_s:
             return False

@@ -518,7 +518,9 @@ class HealthNode(LifecycleNode):
         now = self._now_s()
         counters = estimator.counters
         rejected = rejected_by_reason(counters, self._node_rejects)
-        self._tracker.inputs.update(now, received, counters.accepted, rejected)
+        self._tracker.inputs.update(
+            now, received, counters.accepted, rejected, estimator.input_clock_s
+        )
         self._tracker.events.observe(now, states, counters)
         if states:
             self._latest, self._latest_restored = states[-1], False

@@ -12,6 +12,7 @@ import pytest
 from prsm_health.actuator import Actuator
 from prsm_health.estimation.inputs import (
     LARGEST_STAMP_S,
+    MAX_BLOCK_SAMPLES,
     STUCK_RUN_SAMPLES,
     TIME_RESET_SAMPLES,
     Block,
@@ -251,6 +252,26 @@ def test_a_stamp_far_ahead_just_before_a_pause_is_judged_by_what_comes_after_it(
     ended = SampleBlocker(PARAMS)
     last = ended.feed(faulty[:700]) + ended.flush()
     assert last[-1].stamp_s == LARGEST_STAMP_S - 1.0 and ended.counters.accepted == 700
+
+
+@pytest.mark.parametrize("size", [1, 7, 3333])
+def test_stamps_that_hardly_advance_still_make_blocks(size: int) -> None:
+    """A clock in the wrong unit, 10 ns a sample: every sample in one 40 ms cell, which never
+    ended; the samples pending for it grew without bound. A block holds MAX_BLOCK_SAMPLES at
+    most, split the same whatever the chunks."""
+    samples = run(35.0)
+    slow = MotorSamples(
+        0.1 + 1e-8 * np.arange(len(samples)),
+        samples.current_a,
+        samples.speed_rad_s,
+        samples.position_rad,
+    )
+    blocker = SampleBlocker(PARAMS)
+    blocks = fed_in_chunks(blocker.feed, slow, size)
+    assert len(blocker._pending) < MAX_BLOCK_SAMPLES + STUCK_RUN_SAMPLES + size
+    assert [b.samples for b in blocks] == [MAX_BLOCK_SAMPLES] * 3  # the rest pending
+    blocks += blocker.flush()
+    assert sum(b.samples for b in blocks) == blocker.counters.accepted == len(slow)
 
 
 def test_standstill_and_reversal_blocks_have_no_direction() -> None:
