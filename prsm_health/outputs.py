@@ -113,9 +113,10 @@ class InputHealth:
     case, plus the caller's own, e.g. ``joint_missing``). recent_rejected_fraction: share of
     the samples judged over the last second that were rejected; recent_rejected: those, by
     reason. topic: the input topic (empty if unknown): the stale message names it while no
-    input came (a wrong input_topic shows there). last_accepted_s: when the estimator last
-    accepted a sample, on the same clock (None before the first): while messages come but
-    every sample is rejected (a stuck or dead sensor), the estimates stop. stamp_rate: seconds
+    input came (a wrong input_topic shows there). unaccepted_since_s: when the first message
+    came that no accepted sample has followed yet, on the same clock (None: every one has;
+    samples are counted accepted as their block closes, tens of ms later): while messages come
+    but every sample is rejected (a stuck or dead sensor), the estimates stop. stamp_rate: seconds
     by which the accepted samples' stamps advanced per second of the caller's clock over the
     last second (-1: not known, e.g. in an offline replay, whose clock is the stamps).
     """
@@ -128,7 +129,7 @@ class InputHealth:
     recent_rejected_fraction: float = 0.0
     recent_rejected: Mapping[str, int] = field(default_factory=dict)
     topic: str = ""
-    last_accepted_s: float | None = None
+    unaccepted_since_s: float | None = None
     stamp_rate: float = -1.0
 
 
@@ -414,7 +415,8 @@ def diagnostic_statuses(
         stale = f"stale: no input yet on {inputs.topic}" if inputs.topic else "stale: no input yet"
     elif now_s - inputs.last_sample_s > timeout:
         stale = f"stale: no input for {now_s - inputs.last_sample_s:.1f} s"
-    unaccepted_s = now_s - inputs.last_accepted_s if inputs.last_accepted_s is not None else 0.0
+    since = inputs.unaccepted_since_s
+    unaccepted_s = now_s - since if since is not None else 0.0
     rejecting = stale is None and unaccepted_s > timeout
     if rejecting:
         stale = f"stale: no sample accepted for {unaccepted_s:.1f} s"

@@ -47,7 +47,8 @@ class InputTracker:
         self.topic = ""
         self._received_total = 0
         self._last_sample_s: float | None = None
-        self._last_accepted_s: float | None = None
+        # The first message received since a sample was last accepted (None: none since).
+        self._unaccepted_since_s: float | None = None
         self._received: deque[tuple[float, int]] = deque()
         # (time, the inputs' clock) where it moved: how fast the stamps advance
         self._clock: deque[tuple[float, float]] = deque()
@@ -83,6 +84,8 @@ class InputTracker:
         if received:
             self._received_total += received
             self._last_sample_s = now_s
+            if self._unaccepted_since_s is None:
+                self._unaccepted_since_s = now_s
             self._received.append((now_s, received))
 
     def judge(
@@ -110,7 +113,7 @@ class InputTracker:
             if count != self._rejected.get(reason, 0)
         }
         if new_accepted > 0:
-            self._last_accepted_s = now_s
+            self._unaccepted_since_s = None
         if new_accepted or new_rejected:
             self._judged.append((now_s, new_accepted, new_rejected))
         self._accepted, self._rejected = accepted, dict(rejected)
@@ -128,8 +131,8 @@ class InputTracker:
         """The input health at ``now_s``."""
         if self._last_sample_s is not None and now_s < self._last_sample_s:
             self._last_sample_s = now_s  # the clock went back (class docstring)
-        if self._last_accepted_s is not None and now_s < self._last_accepted_s:
-            self._last_accepted_s = now_s
+        if self._unaccepted_since_s is not None and now_s < self._unaccepted_since_s:
+            self._unaccepted_since_s = now_s
         self._trim(now_s)
         accepted = sum(entry[1] for entry in self._judged)
         recent: Counter[str] = Counter()
@@ -152,7 +155,7 @@ class InputTracker:
             recent_rejected_fraction=sum(recent.values()) / judged if judged > 0 else 0.0,
             recent_rejected=dict(recent),
             topic=self.topic,
-            last_accepted_s=self._last_accepted_s,
+            unaccepted_since_s=self._unaccepted_since_s,
             stamp_rate=stamp_rate,
         )
 

@@ -91,11 +91,26 @@ def test_input_that_stops_as_the_clock_jumps_back_goes_stale() -> None:
     params = params_from_mapping({"actuator": {"preset": "dong2022-downhole"}})
     tracker.inputs.update(10.0, 100, accepted=100, rejected={})
     assert tracker.inputs.health(1.0).last_sample_s == 1.0
-    assert tracker.inputs.health(1.0).last_accepted_s == 1.0
     timeout = params.diagnostics.stale_timeout_s
     later = tracker.statuses(state(), params, "left", 1.0 + timeout + 0.5)
     assert all(s.level == Level.STALE for s in later), [(s.name, s.message) for s in later]
     assert tracker.statuses(state(), params, "left", 1.0 + timeout / 2)[0].level == Level.OK
+
+
+def test_messages_that_no_accepted_sample_follows() -> None:
+    """Samples count as accepted when their block closes: messages that a closing block follows
+    within the timeout are not a stuck sensor (at a stream's start the estimates went STALE,
+    "no sample accepted for 4 s", until the first block closed); messages that none follows
+    are, from the first of them on."""
+    tracker = InputTracker()
+    tracker.update(0.0, 40, accepted=40, rejected={"stuck": 0})
+    tracker.update(4.0, 5, accepted=40, rejected={"stuck": 0})  # a new stream, no block yet
+    assert tracker.health(4.05).unaccepted_since_s == 4.0
+    tracker.update(4.06, 60, accepted=80, rejected={"stuck": 0})  # its first block closed
+    assert tracker.health(4.1).unaccepted_since_s is None
+    for k in range(1, 60):  # then only rejections
+        tracker.update(4.06 + 0.1 * k, 100, accepted=80, rejected={"stuck": 100 * k})
+    assert tracker.health(10.0).unaccepted_since_s == pytest.approx(4.16)
 
 
 def test_rejections_by_reason_include_the_callers_own() -> None:

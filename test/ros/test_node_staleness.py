@@ -4,12 +4,15 @@ recovers (real processes, the node's clock is the system clock here). The same n
 
 from __future__ import annotations
 
+import dataclasses
 import time
 from pathlib import Path
 from typing import Any
 
+import numpy as np
 import pytest
 
+from prsm_health.bags.writer import BagWriter, write_motor_states
 from prsm_health.outputs import AXIAL_LOAD, INPUT_HEALTH, JAMMED_ROLLERS, STATUS_NAMES
 from test.ros.data import ORIGIN_S, synthetic_run, write_bag
 from test.ros.harness import Listener, NodeProcess, play
@@ -97,5 +100,40 @@ def test_stale_then_recovered(ros: None, tmp_path: Path) -> None:
             listener.wait_for(lambda: bool(recovered()), 5.0, "recovery")
             assert {s["level"] for s in recovered()[0].values()} <= {"OK", "WARN"}
             assert node.alive()
+            # Stamps on the node's clock: not taken for a clock in the wrong unit.
+            inputs = [st[INPUT_HEALTH] for _, st in series() if INPUT_HEALTH in st]
+            assert not [s["message"] for s in inputs if "stamps advance" in s["message"]]
+            rates = [float(s["values"]["stamp_rate"]) for s in inputs]
+            assert [r for r in rates if r >= 0.0] and all(r < 0.0 or 0.5 < r < 2.0 for r in rates)
+    finally:
+        listener.close()
+
+
+@pytest.mark.timeout(90)
+def test_stamps_on_another_clock_are_named(ros: None, tmp_path: Path) -> None:
+    """Messages published at 1 kHz whose stamps advance 1 us each (a clock in the wrong unit):
+    the input health warns, naming the stamps' rate against the node's clock (it read
+    "1000 Hz, 0 rejected" while no block completed)."""
+    samples = synthetic_run(3.0)
+    slow = dataclasses.replace(samples, stamp_s=ORIGIN_S + 1e-6 * np.arange(len(samples)))
+    bag = tmp_path / "slow"
+    with BagWriter(bag) as writer:  # logged 1 ms apart: played at 1 kHz
+        logged = np.round(samples.stamp_s * 1e9).astype(np.int64)
+        write_motor_states(writer, slow, receive_time_ns=logged)
+    listener = Listener()
+    try:
+        state_file = str(tmp_path / "state.json")
+        with NodeProcess(tmp_path, hardware_id=HARDWARE_ID, state_file=state_file) as node:
+            node.wait_log("configured")
+            play(bag, listener=listener)
+            messages = [
+                s["message"]
+                for d in listener.diagnostics
+                for s in d["status"]
+                if s["name"] == INPUT_HEALTH and s["hardware_id"] == HARDWARE_ID
+            ]
+            assert [m for m in messages if "stamps advance 0.001 s per second received" in m], (
+                messages
+            )
     finally:
         listener.close()
