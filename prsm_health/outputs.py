@@ -117,8 +117,8 @@ class InputHealth:
     came that no accepted sample has followed yet, on the same clock (None: every one has;
     samples are counted accepted as their block closes, tens of ms later): while messages come
     but every sample is rejected (a stuck or dead sensor), the estimates stop. stamp_rate: seconds
-    by which the accepted samples' stamps advanced per second of the caller's clock over the
-    last second (-1: not known, e.g. in an offline replay, whose clock is the stamps).
+    by which the accepted samples' stamps advance per second of the caller's clock (the median
+    over the last second; -1: not known, e.g. in an offline replay, whose clock is the stamps).
     """
 
     rate_hz: float

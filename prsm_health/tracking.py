@@ -11,6 +11,8 @@ from __future__ import annotations
 from collections import Counter, deque
 from collections.abc import Iterable, Mapping
 
+import numpy as np
+
 from prsm_health.estimation.estimate import EstimateEvent, HealthState
 from prsm_health.estimation.inputs import InputCounters, RejectReason
 from prsm_health.estimation.params import EstimatorParams
@@ -23,6 +25,8 @@ from prsm_health.outputs import (
 
 #: Window of the input rate and of the recent rejected fraction [s].
 WINDOW_S = 1.0
+#: Moves of the inputs' clock in the window needed to give the stamps' rate.
+STAMP_RATE_MOVES = 10
 
 
 def rejected_by_reason(counters: InputCounters, extra: Mapping[str, int]) -> dict[str, int]:
@@ -139,10 +143,6 @@ class InputTracker:
         for _, _, reasons in self._judged:
             recent.update(reasons)
         judged = accepted + sum(recent.values())
-        stamp_rate = -1.0
-        if len(self._clock) >= 2 and self._clock[-1][0] - self._clock[0][0] >= WINDOW_S / 2:
-            (then, clock_then), (last, clock_last) = self._clock[0], self._clock[-1]
-            stamp_rate = (clock_last - clock_then) / (last - then)
         return InputHealth(
             rate_hz=sum(count for _, count in self._received) / WINDOW_S,
             last_sample_s=self._last_sample_s,
@@ -156,8 +156,24 @@ class InputTracker:
             recent_rejected=dict(recent),
             topic=self.topic,
             unaccepted_since_s=self._unaccepted_since_s,
-            stamp_rate=stamp_rate,
+            stamp_rate=self._stamp_rate(),
         )
+
+    def _stamp_rate(self) -> float:
+        """The median, over the window, of how far the inputs' clock moved per second of the
+        caller's between two of its moves (-1 with fewer than STAMP_RATE_MOVES over half the
+        window): one jump of the stamps (a pause of the sensor that the caller's clock did not
+        share, a clock set ahead) is not a rate."""
+        if len(self._clock) <= STAMP_RATE_MOVES or (
+            self._clock[-1][0] - self._clock[0][0] < WINDOW_S / 2
+        ):
+            return -1.0
+        times, clocks = np.array(self._clock).T
+        elapsed, moved = np.diff(times), np.diff(clocks)
+        between = elapsed > 0.0
+        if np.count_nonzero(between) < STAMP_RATE_MOVES:
+            return -1.0
+        return float(np.median(moved[between] / elapsed[between]))
 
 
 class EventTracker:

@@ -77,6 +77,11 @@ def test_the_stamps_rate_against_the_callers_clock() -> None:
     assert tracker.health(1.0).stamp_rate == pytest.approx(1e-5)
     tracker.update(1.01, 10, 1020, {}, input_clock_s=1.0)  # a time reset of the inputs
     assert tracker.health(1.01).stamp_rate == -1.0
+    steady = InputTracker()  # on the caller's clock, with one jump of the stamps (a pause)
+    for i in range(101):
+        stamp = 5.0 + i * 0.01 + (30.0 if i >= 50 else 0.0)
+        steady.update(i * 0.01, 10, 10 * (i + 1), {}, input_clock_s=stamp)
+    assert steady.health(1.0).stamp_rate == pytest.approx(1.0)
     silent = InputTracker()
     silent.update(0.0, 10, 10, {})
     silent.update(0.9, 10, 20, {})

@@ -104,7 +104,10 @@ def test_stale_then_recovered(ros: None, tmp_path: Path) -> None:
             inputs = [st[INPUT_HEALTH] for _, st in series() if INPUT_HEALTH in st]
             assert not [s["message"] for s in inputs if "stamps advance" in s["message"]]
             rates = [float(s["values"]["stamp_rate"]) for s in inputs]
-            assert [r for r in rates if r >= 0.0] and all(r < 0.0 or 0.5 < r < 2.0 for r in rates)
+            known = [r for r in rates if r >= 0.0]
+            # Across the pause between the bags (2 s of stamps in less of the node's clock,
+            # the end-to-end rate read 2.3 once) as well: the median of the moves.
+            assert known and all(0.5 < r < 2.0 for r in known), rates
     finally:
         listener.close()
 
