@@ -61,6 +61,10 @@ TIME_RESET_SAMPLES = 10
 #: 4.3e13) and every time difference stay far from overflowing; a finite stamp of 1e308
 #: overflowed them.
 LARGEST_STAMP_S = 2.0**31
+#: Motor positions beyond this magnitude [rad] are out of range: 1.6e11 motor revolutions, 50
+#: years at 6000 rpm. Inside it the carrier angle keeps better than 1e-3 rad of precision (the
+#: ripple's phase); 1e308 was accepted and the phase meant nothing.
+LARGEST_POSITION_RAD = 1e12
 
 
 class RejectReason(enum.IntEnum):
@@ -239,16 +243,17 @@ class SampleBlocker:
         self.counters.rejected[reason] += int(np.count_nonzero(mask))
 
     def _in_range(self, samples: MotorSamples) -> BoolArray:
-        """Finite, within the drive's current and speed range, and stamped within
-        LARGEST_STAMP_S."""
+        """Finite, within the drive's current and speed range, stamped within LARGEST_STAMP_S
+        and at a position within LARGEST_POSITION_RAD."""
         # A comparison with NaN or inf is False here (numpy emits no warning for comparisons):
         # one test per column tells whether every sample passes, the reasons only on a failure.
         in_range = (
             (np.abs(samples.stamp_s) <= LARGEST_STAMP_S)
             & (np.abs(samples.current_a) <= self._max_current)
             & (np.abs(samples.speed_rad_s) <= self._max_speed)
+            & (np.abs(samples.position_rad) <= LARGEST_POSITION_RAD)
         )
-        ok = np.asarray(in_range & np.isfinite(samples.position_rad))
+        ok = np.asarray(in_range)
         if not ok.all():
             finite = (
                 np.isfinite(samples.stamp_s)

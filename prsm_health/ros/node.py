@@ -96,6 +96,8 @@ DIAGNOSTICS_QOS = QoSProfile(depth=10, reliability=QoSReliabilityPolicy.RELIABLE
 CONFIGURE_FAILED_PERIOD_S = 1.0
 #: How often the main loop returns to Python to see a SIGINT/SIGTERM [s].
 SPIN_TIMEOUT_S = 0.1
+#: A maintenance note longer than this is logged cut, with its length.
+LOGGED_NOTE_CHARS = 500
 
 
 def _descriptor(spec: ParameterSpec) -> ParameterDescriptor:
@@ -586,7 +588,10 @@ class HealthNode(LifecycleNode):
             reset += ["fatigue damage 0"] if request.reset_fatigue_damage else []
             response.success = True
             response.message = "reset after maintenance: " + ", ".join(reset)
-            self.get_logger().info(f"{response.message} (note: {request.note!r})")
+            note = request.note
+            if len(note) > LOGGED_NOTE_CHARS:  # a 1 MB note was one log line of 1 MB
+                note = f"{note[:LOGGED_NOTE_CHARS]}... ({len(request.note)} characters)"
+            self.get_logger().info(f"{response.message} (note: {note!r})")
             self._saved_at_samples = -1  # changed without new samples: a failed save is retried
             self._save()
         except ValueError as exc:

@@ -30,6 +30,7 @@ itself: the state is restored and the problem reported.
 from __future__ import annotations
 
 import dataclasses
+import errno
 import json
 import math
 import os
@@ -100,6 +101,13 @@ class StateStore:
         }
         text = json.dumps(document, allow_nan=False)
         folder = self.path.parent
+        for above in (folder, *folder.parents):  # mkdir said only "File exists: '<folder>'"
+            if above.exists():
+                if not above.is_dir():
+                    raise NotADirectoryError(
+                        errno.ENOTDIR, "a file stands where the state's folder goes", str(above)
+                    )
+                break
         folder.mkdir(parents=True, exist_ok=True)
         fd, temporary = tempfile.mkstemp(prefix=f".{self.path.name}.", dir=folder)
         try:

@@ -93,10 +93,11 @@ def test_bad_values_are_rejected_and_counted_by_reason() -> None:
         position_rad=(30, math.nan),
     )
     samples = with_values(samples, current_a=(400, 5.0 + 3.0))  # a spike of 3 A
+    samples = with_values(samples, position_rad=(600, 1e308))  # the carrier's phase is lost
     _, blocker = feed_in_chunks(samples, 50)
     rejected = blocker.counters.rejected
     assert rejected[RejectReason.NON_FINITE] == 2
-    assert rejected[RejectReason.OUT_OF_RANGE] == 1
+    assert rejected[RejectReason.OUT_OF_RANGE] == 2
     assert rejected[RejectReason.SPIKE] == 1
     assert blocker.counters.accepted + blocker.counters.rejected_total == len(samples)
 

@@ -111,6 +111,12 @@ def test_a_reset_after_maintenance_over_the_service(ros: None, tmp_path: Path) -
             assert 0.0 < after[-1]["precision_loss_um"] < jammed["precision_loss_um"]
             assert after[-1]["fatigue_damage"] > jammed["fatigue_damage"]
 
+            # A long note is logged cut, with its length (1 MB was one log line of 1 MB).
+            long = listener.call(ResetAfterMaintenance, SERVICE, request(0, note="x" * 100_000))
+            assert long.success, long.message
+            node.wait_log("... (100000 characters)")
+            assert "x" * 501 not in node.log()
+
         with NodeProcess(
             tmp_path, "unconfigured", autostart=False, state_file=str(tmp_path / "other.json")
         ) as node:

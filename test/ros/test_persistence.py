@@ -275,6 +275,13 @@ def test_failed_save_leaves_the_old_file(
     assert list(tmp_path.iterdir()) == [store.path]
 
 
+def test_a_file_where_the_folder_goes_is_named(tmp_path: Path, params: EstimatorParams) -> None:
+    (tmp_path / "sub").write_text("not a folder")
+    store = StateStore(tmp_path / "sub" / "deeper" / "left.json", "left")
+    with pytest.raises(NotADirectoryError, match="a file stands where the state's folder goes"):
+        store.save(HealthEstimator(params))
+
+
 def test_default_state_file(monkeypatch: pytest.MonkeyPatch) -> None:
     monkeypatch.setenv("XDG_STATE_HOME", "/var/state")
     assert default_state_file("left") == Path("/var/state/prsm_health/left.json")
