@@ -383,8 +383,8 @@ def diagnostic_statuses(
     ``state``: the latest estimate (None before the first). ``inputs``, ``events``: see their
     classes. ``now_s``: the caller's clock, the same as ``inputs.last_sample_s``. Every status
     is STALE when the last input is older than ``thresholds.stale_timeout_s`` or never came;
-    every status but the input health's (which says why) when input comes but the last sample
-    accepted is older than that.
+    every status but the input health's (which says why) when messages have come for longer
+    than that with no sample accepted (``inputs.unaccepted_since_s``).
     """
     events = events if events is not None else FilterEvents()
     fields: dict[str, Any] | None = None

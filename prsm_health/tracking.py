@@ -40,8 +40,9 @@ class InputTracker:
     """Messages received and samples judged, over a sliding window of :data:`WINDOW_S`.
 
     Times are the caller's clock in seconds; if it jumps back (a looped bag's sim time), the
-    window starts again, and the last receipt and acceptance count from the jump (their age is
-    unknown: no older than the jump, so that input that stops with it goes stale). Counts are of
+    window starts again, and the last receipt and the first one not followed by an accepted
+    sample count from the jump (their age is unknown: no older than the jump, so that input
+    that stops with it goes stale). Counts are of
     this run: totals an estimator brings from a restored state are its starting point
     (:meth:`start_from`), not samples judged now. ``topic``: where the inputs come from (named
     by the input-health status; empty if unknown).
