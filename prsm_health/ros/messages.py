@@ -32,14 +32,11 @@ def stamp_seconds(stamp: Any) -> float:
 
 
 def time_msg(seconds: float) -> Time:
-    """Float seconds -> ``builtin_interfaces/Time``, within its int32 seconds (0 for a
-    non-finite time). A negative time has a negative ``sec`` and ``nanosec`` in [0, 1e9), as
-    the input's stamps are read (estimates of a sensor clock before its epoch were all stamped
-    0)."""
-    if not math.isfinite(seconds):
+    """Float seconds -> ``builtin_interfaces/Time`` (0 for a negative or non-finite time)."""
+    if not math.isfinite(seconds) or seconds < 0.0:
         return Time()
-    ns = min(max(round(seconds * NS_PER_S), -(2**31) * NS_PER_S), (2**31 - 1) * NS_PER_S)
-    return Time(sec=ns // NS_PER_S, nanosec=ns % NS_PER_S)
+    ns = round(seconds * NS_PER_S)
+    return Time(sec=min(ns // NS_PER_S, 2**31 - 1), nanosec=ns % NS_PER_S)
 
 
 @dataclass(frozen=True)

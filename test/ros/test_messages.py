@@ -32,11 +32,7 @@ def test_stamps() -> None:
     assert math.isnan(stamp_seconds(Time(sec=5, nanosec=1_000_000_000)))
     assert time_msg(12.5) == Time(sec=12, nanosec=500_000_000)
     assert time_msg(1.9999999999) == Time(sec=2, nanosec=0)
-    assert time_msg(math.nan) == Time()
-    assert time_msg(-1.25) == Time(sec=-2, nanosec=750_000_000)
-    assert stamp_seconds(time_msg(-1.25)) == -1.25
-    assert time_msg(-1e12) == Time(sec=-(2**31), nanosec=0)
-    assert time_msg(1e12) == Time(sec=2**31 - 1, nanosec=0)
+    assert time_msg(math.nan) == Time() == time_msg(-1.0)
 
 
 def test_input_sample() -> None:
