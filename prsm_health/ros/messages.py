@@ -32,7 +32,9 @@ def stamp_seconds(stamp: Any) -> float:
 
 
 def time_msg(seconds: float) -> Time:
-    """Float seconds -> ``builtin_interfaces/Time`` (0 for a negative or non-finite time)."""
+    """Float seconds -> ``builtin_interfaces/Time`` (0 for a negative or non-finite time: the
+    message could carry a negative ``sec``, but rclpy's ``Time.from_msg`` and rclcpp's
+    ``Time`` refuse one, and a subscriber would fail on it)."""
     if not math.isfinite(seconds) or seconds < 0.0:
         return Time()
     ns = round(seconds * NS_PER_S)
