@@ -113,10 +113,11 @@ class InputHealth:
     case, plus the caller's own, e.g. ``joint_missing``). recent_rejected_fraction: share of
     the samples judged over the last second that were rejected; recent_rejected: those, by
     reason. topic: the input topic (empty if unknown): the stale message names it while no
-    input came (a wrong input_topic shows there). unaccepted_since_s: when the first message
-    came that no accepted sample has followed yet, on the same clock (None: every one has;
-    samples are counted accepted as their block closes, tens of ms later): while messages come
-    but every sample is rejected (a stuck or dead sensor), the estimates stop. stamp_rate: seconds
+    input came (a wrong input_topic shows there). rejecting_since_s: when the first sample
+    was rejected that no accepted sample has followed yet, on the same clock (None: none): while
+    every sample is rejected (a stuck or dead sensor), the estimates stop. (Not the first message
+    received: samples count as accepted when their block closes, which takes longer than the
+    stale timeout with long blocks or a slow stream.) stamp_rate: seconds
     by which the accepted samples' stamps advance per second of the caller's clock (the median
     over the last second; -1: not known, e.g. in an offline replay, whose clock is the stamps).
     """
@@ -129,7 +130,7 @@ class InputHealth:
     recent_rejected_fraction: float = 0.0
     recent_rejected: Mapping[str, int] = field(default_factory=dict)
     topic: str = ""
-    unaccepted_since_s: float | None = None
+    rejecting_since_s: float | None = None
     stamp_rate: float = -1.0
 
 
@@ -383,8 +384,8 @@ def diagnostic_statuses(
     ``state``: the latest estimate (None before the first). ``inputs``, ``events``: see their
     classes. ``now_s``: the caller's clock, the same as ``inputs.last_sample_s``. Every status
     is STALE when the last input is older than ``thresholds.stale_timeout_s`` or never came;
-    every status but the input health's (which says why) when messages have come for longer
-    than that with no sample accepted (``inputs.unaccepted_since_s``).
+    every status but the input health's (which says why) when every sample has been rejected
+    for longer than that (``inputs.rejecting_since_s``) while input comes.
     """
     events = events if events is not None else FilterEvents()
     fields: dict[str, Any] | None = None
@@ -415,11 +416,11 @@ def diagnostic_statuses(
         stale = f"stale: no input yet on {inputs.topic}" if inputs.topic else "stale: no input yet"
     elif now_s - inputs.last_sample_s > timeout:
         stale = f"stale: no input for {now_s - inputs.last_sample_s:.1f} s"
-    since = inputs.unaccepted_since_s
-    unaccepted_s = now_s - since if since is not None else 0.0
-    rejecting = stale is None and unaccepted_s > timeout
+    since = inputs.rejecting_since_s
+    rejecting_s = now_s - since if since is not None else 0.0
+    rejecting = stale is None and rejecting_s > timeout
     if rejecting:
-        stale = f"stale: no sample accepted for {unaccepted_s:.1f} s"
+        stale = f"stale: every sample rejected for {rejecting_s:.1f} s"
     statuses = []
     for name, (level, message, values) in parts:
         if stale is not None and not (rejecting and name == INPUT_HEALTH):

@@ -40,8 +40,8 @@ class InputTracker:
     """Messages received and samples judged, over a sliding window of :data:`WINDOW_S`.
 
     Times are the caller's clock in seconds; if it jumps back (a looped bag's sim time), the
-    window starts again, and the last receipt and the first one not followed by an accepted
-    sample count from the jump (their age is unknown: no older than the jump, so that input
+    window starts again, and the last receipt and the first rejection not followed by an
+    accepted sample count from the jump (their age is unknown: no older than the jump, so that input
     that stops with it goes stale). Counts are of
     this run: totals an estimator brings from a restored state are its starting point
     (:meth:`start_from`), not samples judged now. ``topic``: where the inputs come from (named
@@ -52,8 +52,8 @@ class InputTracker:
         self.topic = ""
         self._received_total = 0
         self._last_sample_s: float | None = None
-        # The first message received since a sample was last accepted (None: none since).
-        self._unaccepted_since_s: float | None = None
+        # When the first sample was rejected since one was last accepted (None: none since).
+        self._rejecting_since_s: float | None = None
         self._received: deque[tuple[float, int]] = deque()
         # (time, the inputs' clock) where it moved: how fast the stamps advance
         self._clock: deque[tuple[float, float]] = deque()
@@ -89,8 +89,6 @@ class InputTracker:
         if received:
             self._received_total += received
             self._last_sample_s = now_s
-            if self._unaccepted_since_s is None:
-                self._unaccepted_since_s = now_s
             self._received.append((now_s, received))
 
     def judge(
@@ -110,6 +108,8 @@ class InputTracker:
         if input_clock_s is not None and (not self._clock or input_clock_s != self._clock[-1][1]):
             if self._clock and (now_s < self._clock[-1][0] or input_clock_s < self._clock[-1][1]):
                 self._clock.clear()  # either clock went back: compare from here
+            elif self._clock and now_s == self._clock[-1][0]:
+                self._clock.pop()  # one move per time of the caller's (a sim /clock steps)
             self._clock.append((now_s, input_clock_s))
         new_accepted = accepted - self._accepted
         new_rejected = {
@@ -118,7 +118,9 @@ class InputTracker:
             if count != self._rejected.get(reason, 0)
         }
         if new_accepted > 0:
-            self._unaccepted_since_s = None
+            self._rejecting_since_s = None
+        elif new_rejected and self._rejecting_since_s is None:
+            self._rejecting_since_s = now_s
         if new_accepted or new_rejected:
             self._judged.append((now_s, new_accepted, new_rejected))
         self._accepted, self._rejected = accepted, dict(rejected)
@@ -136,8 +138,8 @@ class InputTracker:
         """The input health at ``now_s``."""
         if self._last_sample_s is not None and now_s < self._last_sample_s:
             self._last_sample_s = now_s  # the clock went back (class docstring)
-        if self._unaccepted_since_s is not None and now_s < self._unaccepted_since_s:
-            self._unaccepted_since_s = now_s
+        if self._rejecting_since_s is not None and now_s < self._rejecting_since_s:
+            self._rejecting_since_s = now_s
         self._trim(now_s)
         accepted = sum(entry[1] for entry in self._judged)
         recent: Counter[str] = Counter()
@@ -156,7 +158,7 @@ class InputTracker:
             recent_rejected_fraction=sum(recent.values()) / judged if judged > 0 else 0.0,
             recent_rejected=dict(recent),
             topic=self.topic,
-            unaccepted_since_s=self._unaccepted_since_s,
+            rejecting_since_s=self._rejecting_since_s,
             stamp_rate=self._stamp_rate(),
         )
 

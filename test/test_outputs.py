@@ -236,7 +236,7 @@ def test_estimates_go_stale_while_every_sample_is_rejected() -> None:
     their estimate is old; the input health says why (it stayed OK, frozen, for ever)."""
     th = DiagnosticThresholds(stale_timeout_s=0.5)
     rejecting = inputs(
-        unaccepted_since_s=NOW - 6.0, recent_rejected_fraction=1.0, recent_rejected={"stuck": 1000}
+        rejecting_since_s=NOW - 6.0, recent_rejected_fraction=1.0, recent_rejected={"stuck": 1000}
     )
     result = statuses(i=rejecting, th=th)
     for name, (level, message, _) in result.items():
@@ -244,8 +244,8 @@ def test_estimates_go_stale_while_every_sample_is_rejected() -> None:
             assert level == Level.WARN and "100.0 % rejected in the last second (stuck)" in message
         else:
             assert level == Level.STALE, name
-            assert message.startswith("stale: no sample accepted for 6.0 s; last: "), name
-    accepting = statuses(i=inputs(unaccepted_since_s=NOW - 0.4), th=th)
+            assert message.startswith("stale: every sample rejected for 6.0 s; last: "), name
+    accepting = statuses(i=inputs(rejecting_since_s=NOW - 0.4), th=th)
     assert {level for level, _, _ in accepting.values()} == {Level.OK}
 
 

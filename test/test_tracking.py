@@ -82,6 +82,11 @@ def test_the_stamps_rate_against_the_callers_clock() -> None:
         stamp = 5.0 + i * 0.01 + (30.0 if i >= 50 else 0.0)
         steady.update(i * 0.01, 10, 10 * (i + 1), {}, input_clock_s=stamp)
     assert steady.health(1.0).stamp_rate == pytest.approx(1.0)
+    stepped = InputTracker()  # a sim /clock of 20 Hz, the node's batches every 5 ms between
+    for i in range(400):
+        now = 0.05 * (i // 10)
+        stepped.update(now, 5, 5 * (i + 1), {}, input_clock_s=5.0 + 0.005 * i)
+    assert stepped.health(0.05 * 39).stamp_rate == pytest.approx(1.0)
     silent = InputTracker()
     silent.update(0.0, 10, 10, {})
     silent.update(0.9, 10, 20, {})
@@ -102,20 +107,22 @@ def test_input_that_stops_as_the_clock_jumps_back_goes_stale() -> None:
     assert tracker.statuses(state(), params, "left", 1.0 + timeout / 2)[0].level == Level.OK
 
 
-def test_messages_that_no_accepted_sample_follows() -> None:
-    """Samples count as accepted when their block closes: messages that a closing block follows
-    within the timeout are not a stuck sensor (at a stream's start the estimates went STALE,
-    "no sample accepted for 4 s", until the first block closed); messages that none follows
-    are, from the first of them on."""
+def test_rejections_that_no_accepted_sample_follows() -> None:
+    """Samples count as accepted when their block closes, seconds after they came with long
+    blocks or a slow stream: messages not judged yet are no stuck sensor (counted from the
+    first message, the estimates went STALE at a stream's start and, with 2 s blocks, half the
+    time). Rejections that no accepted sample follows are, from the first of them on."""
     tracker = InputTracker()
     tracker.update(0.0, 40, accepted=40, rejected={"stuck": 0})
     tracker.update(4.0, 5, accepted=40, rejected={"stuck": 0})  # a new stream, no block yet
-    assert tracker.health(4.05).unaccepted_since_s == 4.0
-    tracker.update(4.06, 60, accepted=80, rejected={"stuck": 0})  # its first block closed
-    assert tracker.health(4.1).unaccepted_since_s is None
+    tracker.update(6.0, 2000, accepted=40, rejected={"stuck": 0})  # its 2 s block still open
+    assert tracker.health(6.0).rejecting_since_s is None
+    tracker.update(6.06, 60, accepted=2080, rejected={"stuck": 0})  # the block closed
     for k in range(1, 60):  # then only rejections
-        tracker.update(4.06 + 0.1 * k, 100, accepted=80, rejected={"stuck": 100 * k})
-    assert tracker.health(10.0).unaccepted_since_s == pytest.approx(4.16)
+        tracker.update(6.06 + 0.1 * k, 100, accepted=2080, rejected={"stuck": 100 * k})
+    assert tracker.health(12.0).rejecting_since_s == pytest.approx(6.16)
+    tracker.update(12.1, 100, accepted=2180, rejected={"stuck": 5900})
+    assert tracker.health(12.1).rejecting_since_s is None
 
 
 def test_rejections_by_reason_include_the_callers_own() -> None:
