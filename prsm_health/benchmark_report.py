@@ -267,9 +267,14 @@ def _false_jams(runs: Sequence[Run]) -> tuple[str, bool]:
 
 
 def _nees(runs: Sequence[ScoredRun]) -> tuple[str, bool]:
-    failed = [r.scene for r in runs if r.metrics.load_nees_consistent is not True]
+    """Consistent on every run; a run with nothing to test (None) is named apart, and is no
+    pass either: the floor is not shown there."""
+    failed = [r.scene for r in runs if r.metrics.load_nees_consistent is False]
+    untested = [r.scene for r in runs if r.metrics.load_nees_consistent is None]
     listed = f"; not: {', '.join(failed)}" if failed else ""
-    return f"{len(runs) - len(failed)}/{len(runs)} consistent{listed}", not failed
+    listed += f"; untested: {', '.join(untested)}" if untested else ""
+    consistent = len(runs) - len(failed) - len(untested)
+    return f"{consistent}/{len(runs)} consistent{listed}", not failed and not untested
 
 
 def floors(results: BenchResults) -> list[Floor]:

@@ -99,7 +99,7 @@ class HealthEstimator:
             ValueError: fewer jammed rollers than the likeliest hypothesis has, or more than
                 the preset's rollers (nothing is changed then but the pending estimates).
         """
-        before = self.finish()
+        before = self.finish(end_of_data=False)
         self._bank.assume_onset(jammed_rollers)
         return before
 
@@ -179,7 +179,8 @@ class HealthEstimator:
 
         The filter's jams only ever increase (docs/estimation.md); maintenance is the one way
         back. The samples fed before the call belong to before the maintenance: their pending
-        block is closed and estimated first, as at the end of a bag (:meth:`finish`), and
+        block is closed and estimated first, as in a pause (:meth:`finish` with
+        ``end_of_data`` False: a last sample that jumped far ahead waits for what follows), and
         those estimates are returned. Then ``jammed_rollers`` (0..N, usually 0 once the
         jammed rollers were freed or replaced) becomes certain, with the likeliest
         hypothesis' load and an unknown ripple (:meth:`JamHypotheses.reset_count`).
@@ -208,7 +209,7 @@ class HealthEstimator:
         for name, flag in flags.items():
             if not isinstance(flag, bool):
                 raise ValueError(f"{name}: must be a bool, got {flag!r}")
-        before = self.finish()
+        before = self.finish(end_of_data=False)  # more samples follow the maintenance
         self._bank.reset_count(int(jammed_rollers))
         self._nis.clear()  # the consistency before the maintenance says nothing about after
         self._gated_run = 0

@@ -44,10 +44,11 @@ SPIKE_SIGMAS = 12.0
 #: This many identical consecutive current samples (while the noise should vary them) are a
 #: stuck sensor; all of them are rejected (blocks close this many samples late for it).
 STUCK_RUN_SAMPLES = 20
-#: A block holds at most this many samples (40 ms at 250 kHz, beyond any drive's rate): with
-#: stamps that hardly advance (a clock in the wrong unit) a block would never end, and the
-#: samples pending for it grew without bound (23 MB and 16 ms per node batch in a minute).
-MAX_BLOCK_SAMPLES = 10_000
+#: A block holds at most ``filter.block_duration_s`` times this many samples (beyond any
+#: drive's rate; 10,000 in the default 40 ms): with stamps that hardly advance (a clock in the
+#: wrong unit) a block would never end, and the samples pending for it grew without bound
+#: (23 MB and 16 ms per node batch in a minute).
+MAX_SAMPLE_RATE_HZ = 250_000.0
 #: A block whose samples span less than this [s] has no measurable slope: its acceleration
 #: and current trend are taken as zero (a speed step over a vanishing span would overflow).
 SHORTEST_SLOPE_SPAN_S = 1e-6
@@ -177,6 +178,8 @@ class SampleBlocker:
         self._max_current = drive.max_current_a
         self._max_speed = params.max_motor_speed_rad_s
         self._spike_a = SPIKE_SIGMAS * params.noise.current_std_a
+        #: The most samples a block holds (MAX_SAMPLE_RATE_HZ).
+        self.block_capacity = math.ceil(params.filter.block_duration_s * MAX_SAMPLE_RATE_HZ)
         self.counters = InputCounters()
         self._last_stamp = -math.inf  # the latest accepted stamp (a held sample's too)
         self._jumped_from = -math.inf  # the stamp the latest accepted one jumped from
@@ -387,11 +390,11 @@ class SampleBlocker:
         line = np.cumsum(gap_before)
         cells = np.floor((t - anchors) / period).astype(np.int64)
         new_cell = np.r_[True, (cells[1:] != cells[:-1]) | (line[1:] != line[:-1])]
-        # A longer cell is split every MAX_BLOCK_SAMPLES from its first sample (the pending
+        # A longer cell is split every block_capacity samples from its first (the pending
         # samples start at a cell's first, so the split does not depend on the chunks).
         index = np.arange(len(t))
         since_start = index - np.maximum.accumulate(np.where(new_cell, index, 0))
-        new_cell |= since_start % MAX_BLOCK_SAMPLES == 0
+        new_cell |= since_start % self.block_capacity == 0
         starts = np.flatnonzero(new_cell)
         if final:
             complete = len(starts)
@@ -418,7 +421,7 @@ class SampleBlocker:
         last = len(t) - STUCK_RUN_SAMPLES
         if last < 1:
             return True
-        if last >= MAX_BLOCK_SAMPLES:
+        if last >= self.block_capacity:
             return False
         first_t, last_t = float(t[0]), float(t[last])
         if not 0.0 <= last_t - first_t <= self._params.filter.max_gap_s:

@@ -395,7 +395,7 @@ class HealthNode(LifecycleNode):
         return super().on_activate(state)
 
     def on_deactivate(self, state: LifecycleState) -> TransitionCallbackReturn:
-        self._stop()
+        self._stop(end_of_data=False)  # activate continues with the same estimator
         return super().on_deactivate(state)
 
     def on_cleanup(self, state: LifecycleState) -> TransitionCallbackReturn:
@@ -415,11 +415,12 @@ class HealthNode(LifecycleNode):
         self._release()
         return TransitionCallbackReturn.SUCCESS
 
-    def _stop(self) -> None:
+    def _stop(self, *, end_of_data: bool = True) -> None:
         """Process what was received, the last unfinished block included (the input ends
-        here), save, unsubscribe and stop the timers."""
+        here; ``end_of_data`` False: it may go on after a reactivation,
+        :meth:`HealthEstimator.finish`), save, unsubscribe and stop the timers."""
         if self._subscription is not None:
-            self._on_batch(final=True)
+            self._on_batch(final=True, end_of_data=end_of_data)
             self.destroy_subscription(self._subscription)
             self._subscription = None
         for timer in self._timers:
@@ -486,12 +487,13 @@ class HealthNode(LifecycleNode):
         )
 
     # --- processing and outputs ---------------------------------------------------------
-    def _on_batch(self, *, final: bool = False) -> None:
+    def _on_batch(self, *, final: bool = False, end_of_data: bool = False) -> None:
         """Estimate the samples received since the last batch. When the input has stopped
         for ``diagnostics.stale_timeout_s`` (steady clock: sim time stops with a bag), or
         ``final``, the samples of the last, unfinished block are estimated too
-        (:meth:`HealthEstimator.finish`; nothing once they are): a stream that ends loses
-        nothing, and its last estimate does not wait for input to resume."""
+        (:meth:`HealthEstimator.finish`, ``end_of_data`` passed on; nothing once they are): a
+        stream that ends loses nothing, and its last estimate does not wait for input to
+        resume."""
         try:
             estimator, config = self._estimator, self._config
             if estimator is None or config is None:
@@ -503,7 +505,7 @@ class HealthNode(LifecycleNode):
             states = estimator.process(samples) if len(samples) else []
             silent_s = now_s - self._input_at_steady_s
             if final or silent_s > estimator.params.diagnostics.stale_timeout_s:
-                states += estimator.finish(end_of_data=final)
+                states += estimator.finish(end_of_data=end_of_data)
             self._handle_estimates(estimator, config, states, received)
         except Exception as exc:
             self._fault("processing", exc)

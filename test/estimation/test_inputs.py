@@ -10,9 +10,9 @@ import numpy as np
 import pytest
 
 from prsm_health.actuator import Actuator
+from prsm_health.estimation.estimator import HealthEstimator
 from prsm_health.estimation.inputs import (
     LARGEST_STAMP_S,
-    MAX_BLOCK_SAMPLES,
     STUCK_RUN_SAMPLES,
     TIME_RESET_SAMPLES,
     Block,
@@ -258,8 +258,8 @@ def test_a_stamp_far_ahead_just_before_a_pause_is_judged_by_what_comes_after_it(
 @pytest.mark.parametrize("size", [1, 7, 3333])
 def test_stamps_that_hardly_advance_still_make_blocks(size: int) -> None:
     """A clock in the wrong unit, 10 ns a sample: every sample in one 40 ms cell, which never
-    ended; the samples pending for it grew without bound. A block holds MAX_BLOCK_SAMPLES at
-    most, split the same whatever the chunks."""
+    ended; the samples pending for it grew without bound. A block holds 10,000 samples at most
+    in 40 ms blocks (MAX_SAMPLE_RATE_HZ), split the same whatever the chunks."""
     samples = run(35.0)
     slow = MotorSamples(
         0.1 + 1e-8 * np.arange(len(samples)),
@@ -268,11 +268,27 @@ def test_stamps_that_hardly_advance_still_make_blocks(size: int) -> None:
         samples.position_rad,
     )
     blocker = SampleBlocker(PARAMS)
+    assert blocker.block_capacity == 10_000
     blocks = fed_in_chunks(blocker.feed, slow, size)
-    assert len(blocker._pending) < MAX_BLOCK_SAMPLES + STUCK_RUN_SAMPLES + size
-    assert [b.samples for b in blocks] == [MAX_BLOCK_SAMPLES] * 3  # the rest pending
+    assert len(blocker._pending) < blocker.block_capacity + STUCK_RUN_SAMPLES + size
+    assert [b.samples for b in blocks] == [10_000] * 3  # the rest pending
     blocks += blocker.flush()
     assert sum(b.samples for b in blocks) == blocker.counters.accepted == len(slow)
+
+
+def test_long_blocks_of_a_normal_stream_are_not_split() -> None:
+    """10 s blocks (the longest filter.block_duration_s) of a 1 kHz stream: the cap scales with
+    the block (a fixed 10,000 samples made a block of 1 sample after each 10,000)."""
+    long = dataclasses.replace(
+        PARAMS,
+        filter=dataclasses.replace(
+            PARAMS.filter, block_duration_s=10.0, max_gap_s=20.0, divergence_window_s=100.0
+        ),
+    )
+    blocker = SampleBlocker(long)
+    blocks = blocker.feed(run(35.0)) + blocker.flush()
+    assert blocker.block_capacity == 2_500_000
+    assert min(b.samples for b in blocks[:-1]) >= 9_999 and len(blocks) == 4
 
 
 def test_standstill_and_reversal_blocks_have_no_direction() -> None:
@@ -396,3 +412,22 @@ def test_a_stamp_beyond_what_a_ros_time_carries_is_out_of_range(size: int) -> No
     assert counters.time_resets == 1 and counters.gaps == 1
     assert counters.accepted + counters.rejected_total == len(samples)
     assert all(math.isfinite(b.stamp_s) and b.duration_s > 0.0 for b in blocks)
+
+
+def test_a_maintenance_reset_in_a_pause_leaves_a_far_ahead_stamp_to_what_follows() -> None:
+    """As the node's silence flush (above): the reset closes the pending block but a last
+    sample stamped far ahead stays held. (Accepted by the reset, it made 100 good samples
+    after the pause rejected and a time reset; a review found it.)"""
+    samples = run(2.0)
+    stamps = samples.stamp_s.copy()
+    stamps[699] = LARGEST_STAMP_S - 1.0
+    faulty = MotorSamples(stamps, samples.current_a, samples.speed_rad_s, samples.position_rad)
+    estimator = HealthEstimator(PARAMS)
+    states = estimator.process(faulty[:700])
+    states += estimator.reset_after_maintenance(
+        0, reset_precision_loss=False, reset_fatigue_damage=False
+    )
+    states += estimator.process(faulty[1500:]) + estimator.finish()
+    counters = estimator.counters
+    assert counters.rejected[RejectReason.TIME_BACKWARDS] == 1 and counters.time_resets == 0
+    assert max(s.stamp_s for s in states) < stamps[-1]
