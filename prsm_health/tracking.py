@@ -89,6 +89,8 @@ class InputTracker:
         if received:
             self._received_total += received
             self._last_sample_s = now_s
+            if self._received and self._received[-1][0] == now_s:  # one entry per time: a
+                received += self._received.pop()[1]  # clock that stands still grew the window
             self._received.append((now_s, received))
 
     def judge(
@@ -122,6 +124,10 @@ class InputTracker:
         elif new_rejected and self._rejecting_since_s is None:
             self._rejecting_since_s = now_s
         if new_accepted or new_rejected:
+            if self._judged and self._judged[-1][0] == now_s:  # one entry per time (receive)
+                _, before_accepted, before_rejected = self._judged.pop()
+                new_accepted += before_accepted
+                new_rejected = dict(Counter(before_rejected) + Counter(new_rejected))
             self._judged.append((now_s, new_accepted, new_rejected))
         self._accepted, self._rejected = accepted, dict(rejected)
         self._trim(now_s)

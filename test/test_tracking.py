@@ -125,6 +125,19 @@ def test_rejections_that_no_accepted_sample_follows() -> None:
     assert tracker.health(12.1).rejecting_since_s is None
 
 
+def test_a_clock_that_stands_still_does_not_grow_the_window() -> None:
+    """use_sim_time with no /clock while input flows: every batch at the same time. The window
+    kept one entry per batch, never trimmed (200 a second, for ever); one per time now, with
+    the same counts."""
+    tracker = InputTracker()
+    for i in range(1000):
+        tracker.update(7.0, 5, accepted=4 * (i + 1), rejected={"spike": i + 1}, input_clock_s=i)
+    assert len(tracker._received) == len(tracker._judged) == len(tracker._clock) == 1
+    health = tracker.health(7.0)
+    assert health.rate_hz == pytest.approx(5000.0) and health.received == 5000
+    assert health.recent_rejected_fraction == pytest.approx(0.2)
+
+
 def test_rejections_by_reason_include_the_callers_own() -> None:
     counters = InputCounters()
     counters.rejected[RejectReason.TIME_BACKWARDS] = 4
