@@ -96,6 +96,8 @@ DIAGNOSTICS_QOS = QoSProfile(depth=10, reliability=QoSReliabilityPolicy.RELIABLE
 CONFIGURE_FAILED_PERIOD_S = 1.0
 #: How often the main loop returns to Python to see a SIGINT/SIGTERM [s].
 SPIN_TIMEOUT_S = 0.1
+#: Parameters a configured node refuses to change: ours and the clock the diagnostics run on.
+APPLIED_AT_CONFIGURE = frozenset({*SPECS, "use_sim_time"})
 #: A maintenance note longer than this is logged cut, with its length.
 LOGGED_NOTE_CHARS = 500
 
@@ -223,21 +225,17 @@ class HealthNode(LifecycleNode):
         service.callback = guarded
 
     def _on_set_parameters(self, parameters: list[Parameter]) -> SetParametersResult:
-        if self._config is not None and any(p.name == "use_sim_time" for p in parameters):
-            # The diagnostics' clock: switched under a running node, every age would jump.
-            return SetParametersResult(
-                successful=False,
-                reason="parameter use_sim_time is applied at configure: deactivate and clean"
-                " up the node first",
-            )
-        ours = [p for p in parameters if p.name in SPECS]
-        for parameter in ours:
-            if self._config is not None:
+        # rclpy's use_sim_time too: the diagnostics' clock, every age would jump under a
+        # running node.
+        for parameter in parameters:
+            if self._config is not None and parameter.name in APPLIED_AT_CONFIGURE:
                 return SetParametersResult(
                     successful=False,
                     reason=f"parameter {parameter.name} is applied at configure: deactivate"
                     " and clean up the node first",
                 )
+        ours = [p for p in parameters if p.name in SPECS]
+        for parameter in ours:
             if problem := SPECS[parameter.name].problem(parameter.value):
                 return SetParametersResult(
                     successful=False, reason=f"parameter {parameter.name}: {problem}"
