@@ -162,7 +162,9 @@ class HealthEstimator:
             rejection_reasons=len(self.counters.rejected),
         )
         if saved.changed_parts:
-            self._bank.restart_filters([(h[0], h[4]) for h in saved.hypotheses])
+            self._bank.restart_filters(
+                [(h.jammed_rollers, h.log_probability) for h in saved.hypotheses]
+            )
         else:
             self._bank.restore(saved.hypotheses)
         self._degradation.state = saved.degradation

@@ -675,8 +675,7 @@ class JamHypotheses:
         self._normalise()
 
     def restore(self, states: list[SavedHypothesis]) -> None:
-        """Replace the hypotheses by saved ones: (count, fresh, x, P, log probability, ripple
-        axis)."""
+        """Replace the hypotheses by saved ones."""
         self.hypotheses = [
             Hypothesis(k, self._new_filter(x, self._safe_covariance(p)), log_prob, fresh, axis)
             for k, fresh, x, p, log_prob, axis in states

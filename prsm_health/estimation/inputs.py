@@ -390,11 +390,12 @@ class SampleBlocker:
         line = np.cumsum(gap_before)
         cells = np.floor((t - anchors) / period).astype(np.int64)
         new_cell = np.r_[True, (cells[1:] != cells[:-1]) | (line[1:] != line[:-1])]
-        # A longer cell is split every block_capacity samples from its first (the pending
-        # samples start at a cell's first, so the split does not depend on the chunks).
-        index = np.arange(len(t))
-        since_start = index - np.maximum.accumulate(np.where(new_cell, index, 0))
-        new_cell |= since_start % self.block_capacity == 0
+        if len(t) > self.block_capacity:  # else no cell can be longer (the common case)
+            # A longer cell is split every block_capacity samples from its first (the pending
+            # samples start at a cell's first, so the split does not depend on the chunks).
+            index = np.arange(len(t))
+            since_start = index - np.maximum.accumulate(np.where(new_cell, index, 0))
+            new_cell |= since_start % self.block_capacity == 0
         starts = np.flatnonzero(new_cell)
         if final:
             complete = len(starts)

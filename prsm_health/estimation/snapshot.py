@@ -8,7 +8,7 @@ from __future__ import annotations
 import hashlib
 import math
 from dataclasses import dataclass
-from typing import Any
+from typing import Any, NamedTuple
 
 import numpy as np
 from numpy.typing import NDArray
@@ -92,10 +92,16 @@ def changed_parts(saved: object, params: EstimatorParams) -> tuple[str, ...]:
     return tuple(name for name, digest in parts if saved.get(name) != digest) or (SOME_PART,)
 
 
-#: One saved hypothesis as :meth:`JamHypotheses.restore
-#: <prsm_health.estimation.hypotheses.JamHypotheses.restore>` takes it: count, fresh, x, P,
-#: log probability, ripple axis.
-SavedHypothesis = tuple[int, bool, FloatArray, FloatArray, float, FloatArray | None]
+class SavedHypothesis(NamedTuple):
+    """One saved hypothesis, as :meth:`JamHypotheses.restore
+    <prsm_health.estimation.hypotheses.JamHypotheses.restore>` takes it."""
+
+    jammed_rollers: int
+    fresh: bool
+    x: FloatArray
+    p: FloatArray
+    log_probability: float
+    ripple_axis: FloatArray | None
 
 
 @dataclass(frozen=True)
@@ -151,7 +157,7 @@ def read_snapshot(
         raise  # it says what is wrong
     except (KeyError, TypeError, ValueError, AttributeError) as exc:
         raise SnapshotError(f"malformed state: {exc!r}") from exc
-    if not any(math.isfinite(h[4]) for h in hypotheses):
+    if not any(math.isfinite(h.log_probability) for h in hypotheses):
         raise SnapshotError("no hypothesis with a probability above zero")
     # Losses, damages, their error terms and the rate only ever grow from zero.
     if not all(0.0 <= v < SNAPSHOT_LARGEST_VALUE for v in degradation.to_dict().values()):
@@ -222,4 +228,4 @@ def _saved_hypothesis(
     )
     if not valid:
         raise SnapshotError(f"hypothesis {k} is malformed")
-    return k, bool(entry["fresh"]), x, p, log_probability, axis
+    return SavedHypothesis(k, bool(entry["fresh"]), x, p, log_probability, axis)
