@@ -13,7 +13,11 @@ Optionally ``/clock`` (rosgraph_msgs/Clock) carries the log time, for nodes with
 keep all messages until every reliable subscriber has them (KEEP_ALL): a subscriber that
 falls behind holds the play back instead of losing messages. With keep-last (10 s at 1 kHz)
 a node with reliable input fed at ``--rate 10`` received 25,474 of 60,000 messages, and the
-play, which can wait only for what its history still holds, reported none lost.
+play, which can wait only for what its history still holds, reported none lost. Fast DDS
+holds at most 5,000 unacknowledged messages per publisher (its default resource limit; the
+QoS depth does not apply to KEEP_ALL): a write beyond blocks 100 ms (its max_blocking_time)
+and fails, so the player writes the message again until a subscriber has taken one, at most
+``ACK_TIMEOUT_S`` (then :class:`PlayError`: a stopped subscriber ends the play).
 
 ``wait_for_subscribers_s``: before the first message, wait until every played topic (and
 ``/clock`` if published) has a subscriber (at most that long; otherwise an error naming the
@@ -41,6 +45,7 @@ from typing import Any
 import rclpy
 from rclpy.duration import Duration
 from rclpy.exceptions import InvalidTopicNameException
+from rclpy.impl.implementation_singleton import rclpy_implementation as _rclpy
 from rclpy.qos import QoSHistoryPolicy, QoSProfile, QoSReliabilityPolicy
 from rosbags.rosbag2 import Reader
 from rosgraph_msgs.msg import Clock
@@ -50,13 +55,12 @@ from prsm_health.bags.raw import read_raw_messages
 from prsm_health.ros.messages import time_msg
 from prsm_health.ros.runtime import message_class
 
-#: Depth of each publisher's QoS profile (its history is KEEP_ALL: module docstring).
-PUBLISHER_DEPTH = 10_000
 #: After the publishers have matched their subscribers, time for the subscribers to match
 #: the publishers [s].
 SETTLE_S = 0.3
-#: How long the end of the play waits for acknowledgements [s]: Fast DDS repairs a lost
-#: message at its heartbeat (every 3 s), later on a starved machine.
+#: How long the player waits for reliable subscribers' acknowledgements [s], at the end of
+#: the play and for a message held back by a full history (module docstring): Fast DDS
+#: repairs a lost message at its heartbeat (every 3 s), later on a starved machine.
 ACK_TIMEOUT_S = 10.0
 NS_PER_S = 1e9
 #: The speed factors played [-]: at the slowest a second of bag lasts 1000 s (17 min), slower
@@ -306,9 +310,7 @@ def play(
     node = rclpy.create_node("prsm_health_player")
     try:
         qos = QoSProfile(
-            history=QoSHistoryPolicy.KEEP_ALL,
-            depth=PUBLISHER_DEPTH,
-            reliability=QoSReliabilityPolicy.RELIABLE,
+            history=QoSHistoryPolicy.KEEP_ALL, reliability=QoSReliabilityPolicy.RELIABLE
         )
         publishers: dict[str, Any] = {}
         for topic in (t for t, count in source.counts.items() if count):  # none for nothing
@@ -364,7 +366,31 @@ def _one_pass(
             delay = target - time.monotonic()
         if clock is not None:
             clock.tick(log_time_ns)
-        publishers[topic].publish(bytes(raw))
+        try:
+            if not _publish_held_back(publishers[topic], bytes(raw), stop):
+                return
+        except _rclpy.RCLError as exc:
+            raise PlayError(
+                f"{topic}: no message taken by its reliable subscribers for {ACK_TIMEOUT_S:g} s"
+                f" after {report.published[topic]} published (is a subscriber stopped?):"
+                f" {_one_line(exc)}"
+            ) from exc
         report.published[topic] += 1
         if stop.is_set():
             return
+
+
+def _publish_held_back(publisher: Any, raw: bytes, stop: threading.Event) -> bool:
+    """Publish ``raw``, written again while the publisher's history is full of messages a
+    reliable subscriber has not acknowledged (each write blocks 100 ms, then fails: module
+    docstring); False if stopped first. The last write's RCLError after ``ACK_TIMEOUT_S``."""
+    deadline = time.monotonic() + ACK_TIMEOUT_S
+    while True:
+        try:
+            publisher.publish(raw)
+            return True
+        except _rclpy.RCLError:
+            if stop.is_set():
+                return False
+            if time.monotonic() > deadline:
+                raise

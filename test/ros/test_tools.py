@@ -330,12 +330,17 @@ def test_play_loops_until_interrupted(ros: None, tmp_path: Path) -> None:
 
 @pytest.mark.timeout(180)
 def test_play_faster_than_a_reliable_node_loses_nothing(ros: None, tmp_path: Path) -> None:
-    """20,000 messages at --rate 50 (50 kHz) into a node with reliable input, which takes
-    them far more slowly: the play is held back and every one arrives. With a keep-last
-    history of 10,000 the player overwrote what the node had not yet taken: a node fed the
-    60,000 of sudden-jam at --rate 10 received 25,474 and counted one jammed roller of two,
-    and the play, which waits only for what its history still holds, exited 0."""
-    count = 20_000
+    """40,000 messages at --rate 50 (50 kHz) into a node with reliable input, stopped
+    (SIGSTOP) for 1 s once it has received 2,000: the play is held back (still running when
+    the node goes on) and every message arrives.
+
+    With a keep-last history of 10,000 the player overwrote what the node had not yet taken:
+    a node fed the 60,000 of sudden-jam at --rate 10 received 25,474 and counted one jammed
+    roller of two, and the play, which waits only for what its history still holds, exited 0.
+    With keep-all, Fast DDS holds 5,000 unacknowledged messages; a write beyond blocks 100 ms
+    and fails, which ended the play with an RCLError (in CI, a node 100 ms behind under load)
+    until the player wrote it again."""
+    count = 40_000
     bag = write_bag(tmp_path / "bag", synthetic_run(count / 1000.0, from_rest=False, seed=5))
     listener = Listener("fast")
 
@@ -350,29 +355,33 @@ def test_play_faster_than_a_reliable_node_loses_nothing(ros: None, tmp_path: Pat
             hardware_id="fast",
             input_qos="reliable",
             state_file=str(tmp_path / "state.json"),
-            diagnostics_rate_hz=5.0,
-        ):
+            diagnostics_rate_hz=20.0,
+        ) as node:
             player = start_player(bag, "--rate", "50")
             try:
+                listener.wait_for(lambda: received() >= 2000, 60.0, "2000 received")
+                node.process.send_signal(signal.SIGSTOP)
+                time.sleep(1.0)
+                held_back = player.poll() is None
+                node.process.send_signal(signal.SIGCONT)
                 out, _ = player.communicate(timeout=150)
             finally:
+                node.process.send_signal(signal.SIGCONT)
                 stop_process(player)
             assert player.returncode == 0, out
+            assert held_back, out
             listener.wait_for(lambda: received() == count, 30.0, f"{count} received")
     finally:
         listener.close()
 
 
-def test_play_names_what_a_reliable_subscriber_did_not_acknowledge(
-    ros: None, tmp_path: Path
-) -> None:
-    """A node subscribing reliably is frozen (SIGSTOP) while the bag plays: its DDS threads
-    acknowledge nothing more, so the player waits ACK_TIMEOUT_S, names the topic, exits 1.
-
-    The node is frozen once its diagnostics say it has received the player's messages: frozen
-    earlier, it might not match the player at all (the player then owes it nothing and exits
-    0; seen in CI when a publisher of an earlier test still counted on the graph)."""
-    bag = write_bag(tmp_path / "bag", synthetic_run(3.0))
+def _play_into_a_stopped_node(tmp_path: Path, seconds: float, rate: str) -> tuple[int, str, float]:
+    """A bag of ``seconds`` at 1 kHz played at ``rate`` into a node subscribing reliably, which
+    is stopped (SIGSTOP) once its diagnostics say it has received the player's messages (frozen
+    earlier, it might not match the player at all: the player then owes it nothing and exits
+    0; seen in CI when a publisher of an earlier test still counted on the graph). Returns
+    the player's exit code, its output and how long it ran on after the stop [s]."""
+    bag = write_bag(tmp_path / "bag", synthetic_run(seconds))
     graph = Listener()
 
     def received() -> int:
@@ -381,24 +390,48 @@ def test_play_names_what_a_reliable_subscriber_did_not_acknowledge(
 
     try:
         with NodeProcess(
-            tmp_path,
-            hardware_id=HARDWARE_ID,
-            input_qos="reliable",
-            input_queue_depth=10_000,
-            diagnostics_rate_hz=20.0,
+            tmp_path, hardware_id=HARDWARE_ID, input_qos="reliable", diagnostics_rate_hz=20.0
         ) as node:
             graph.wait_for(lambda: bool(graph.statuses(HARDWARE_ID)), 30.0, "the node")
-            player = start_player(bag, "--rate", "1")
+            player = start_player(bag, "--rate", rate)
             try:
                 graph.wait_for(lambda: received() >= 100, 30.0, "the node receiving the bag")
                 node.process.send_signal(signal.SIGSTOP)
-                out, _ = player.communicate(timeout=60)
+                stopped = time.monotonic()
+                out, _ = player.communicate(timeout=90)
+                return player.returncode, out, time.monotonic() - stopped
             finally:
                 node.process.send_signal(signal.SIGCONT)
                 stop_process(player)
     finally:
         graph.close()
-    assert player.returncode == 1, out
+
+
+@pytest.mark.timeout(120)
+def test_play_ends_when_a_reliable_subscriber_takes_nothing(ros: None, tmp_path: Path) -> None:
+    """The node is stopped early in a bag of 8,000 messages, more than the 5,000 Fast DDS
+    holds for it unacknowledged: the play, held back, waits ACK_TIMEOUT_S for it to take one,
+    then exits 1 naming the topic and what was published."""
+    returncode, out, waited_s = _play_into_a_stopped_node(tmp_path, 8.0, rate="5")
+    assert returncode == 1, out
+    assert waited_s > ACK_TIMEOUT_S, out
+    match = re.search(
+        rf"prsm-health play: error: /motor_state: no message taken by its reliable subscribers"
+        rf" for {ACK_TIMEOUT_S:g} s after (\d+) published \(is a subscriber stopped\?\)",
+        out,
+    )
+    assert match, out
+    assert 5000 <= int(match[1]) < 8000, out  # at least the 5,000 held for the node
+
+
+def test_play_names_what_a_reliable_subscriber_did_not_acknowledge(
+    ros: None, tmp_path: Path
+) -> None:
+    """The node is stopped while a bag of 3,000 messages plays (all of them fit in what Fast
+    DDS holds for it): its DDS threads acknowledge nothing more, so the player waits
+    ACK_TIMEOUT_S at the end, names the topic, exits 1."""
+    returncode, out, _ = _play_into_a_stopped_node(tmp_path, 3.0, rate="1")
+    assert returncode == 1, out
     assert "play done: /motor_state 3000 published" in out
     assert f"not acknowledged by every reliable subscriber within {ACK_TIMEOUT_S:g} s" in out
     assert out.rstrip().endswith("/motor_state (messages may be lost)")
