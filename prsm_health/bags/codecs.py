@@ -9,14 +9,15 @@ stamps stay ``sec``/``nanosec`` (see :mod:`prsm_health.bags.stamps`).
 JointState convention: the samples of one joint; ``position`` is the motor position [rad],
 ``velocity`` the motor speed [rad/s] and ``effort`` the motor current [A] (or a torque, see
 :class:`prsm_health.bags.reader.InputTopics`). A value whose array is too short for the joint's
-index, or every value when the joint is not named, decodes as NaN.
+index, or every value when the joint is not named or named more than once (which entry is the
+motor cannot be told), decodes as NaN.
 """
 
 from __future__ import annotations
 
 from collections.abc import Callable, Mapping
 from dataclasses import dataclass
-from typing import Any
+from typing import Any, TypeVar
 
 import numpy as np
 from numpy.typing import NDArray
@@ -36,6 +37,7 @@ from prsm_health.bags.cdr import (
 from prsm_health.bags.typestore import GROUND_TRUTH, JOINT_STATE, MOTOR_STATE, typestore
 
 Columns = dict[str, NDArray[Any]]
+_Name = TypeVar("_Name", str, bytes)
 
 MOTOR_FIELDS = ("current_a", "speed_rad_s", "position_rad")
 JOINT_FIELDS = ("position", "velocity", "effort")
@@ -89,13 +91,17 @@ def truth_layout(payload: bytes | memoryview) -> Layout:
     return cursor.finish()
 
 
+def _single_index(names: list[_Name], joint: _Name) -> int | None:
+    """The index of ``joint`` in ``names`` if it is named exactly once, else None."""
+    return names.index(joint) if names.count(joint) == 1 else None
+
+
 def joint_state_layout(payload: bytes | memoryview, joint: str) -> Layout:
     """Layout of a JointState payload with fields for ``joint`` only where its value exists."""
     cursor = Cursor(payload)
     _stamp(cursor)
     names = [cursor.string(structural=True) for _ in range(cursor.length())]
-    key = joint.encode()
-    index = names.index(key) if key in names else None
+    index = _single_index(names, joint.encode())
     for name in JOINT_FIELDS:
         count = cursor.length()
         if index is None or index >= count:
@@ -211,7 +217,7 @@ def _joint_codec(joint: str) -> _Codec:
     def from_message(message: Any) -> Columns:
         found = _header_columns(message)
         names = list(message.name)
-        index = names.index(joint) if joint in names else None
+        index = _single_index(names, joint)
         for name in JOINT_FIELDS:
             values = getattr(message, name)
             ok = index is not None and index < len(values)
@@ -242,7 +248,7 @@ def decode_joint_states(
 ) -> Columns:
     """Columns ``sec, nanosec, position, velocity, effort`` of ``joint`` in JointState payloads.
 
-    A missing joint or a too short array gives NaN (module docstring).
+    A missing or repeated joint or a too short array gives NaN (module docstring).
 
     Raises:
         PayloadError: a payload is not a JointState (its index is in the error).

@@ -21,7 +21,7 @@ from prsm_health.outputs import DiagnosticStatusData
 
 NS_PER_S = 1_000_000_000
 #: Why a JointState gives no sample (counted as rejected by the node, by these names).
-JOINT_PROBLEMS = ("joint_missing", "joint_incomplete")
+JOINT_PROBLEMS = ("joint_missing", "joint_incomplete", "joint_repeated")
 
 
 def stamp_seconds(stamp: Any) -> float:
@@ -59,15 +59,17 @@ def input_sample(msg: Any, joint: str, torque_constant_nm_per_a: float | None) -
     effort, velocity and position of ``joint``; ``torque_constant_nm_per_a`` None if the
     effort is the current, else k_t (the effort is the motor torque). Problems:
     ``joint_missing`` (no such name), ``joint_incomplete`` (the effort, velocity or position
-    array is too short for the joint's index).
+    array is too short for the joint's index), ``joint_repeated`` (the name appears more than
+    once: which entry is the motor cannot be told).
     """
     stamp = stamp_seconds(msg.header.stamp)
     if isinstance(msg, MotorState):
         return InputSample(stamp, msg.current_a, msg.speed_rad_s, msg.position_rad)
-    try:
-        index = list(msg.name).index(joint)
-    except ValueError:
-        return InputSample(problem=JOINT_PROBLEMS[0])
+    names = list(msg.name)
+    occurrences = names.count(joint)
+    if occurrences != 1:
+        return InputSample(problem=JOINT_PROBLEMS[0] if occurrences == 0 else JOINT_PROBLEMS[2])
+    index = names.index(joint)
     arrays = (msg.effort, msg.velocity, msg.position)
     if any(len(values) <= index for values in arrays):
         return InputSample(problem=JOINT_PROBLEMS[1])

@@ -124,7 +124,7 @@ def _joint(
     )
 
 
-def test_joint_state_decoding_picks_the_joint_and_fills_nan() -> None:
+def test_joint_state_decoding_picks_the_joint_and_fills_nan_where_it_cannot() -> None:
     messages = [
         _joint(["prsm_motor"], [1.0], [2.0], [3.0]),
         _joint(["a", "prsm_motor"], [1.0, 4.0], [2.0, 5.0], [3.0, 6.0], frame="base"),
@@ -132,14 +132,23 @@ def test_joint_state_decoding_picks_the_joint_and_fills_nan() -> None:
         _joint(["a"], [1.0], [2.0], [3.0]),  # joint missing
         _joint(["prsm_motor", "b", "c"], [7.0, 0, 0], [8.0, 0, 0], [9.0, 0, 0]),
         _joint([], [], [], []),
+        _joint(["prsm_motor", "b", "prsm_motor"], [1.0] * 3, [2.0] * 3, [3.0] * 3),  # repeated
     ]
-    expected = [(1, 2, 3), (4, 5, 6), (4, np.nan, np.nan), (np.nan,) * 3, (7, 8, 9), (np.nan,) * 3]
+    expected = [
+        (1, 2, 3),
+        (4, 5, 6),
+        (4, np.nan, np.nan),
+        (np.nan,) * 3,
+        (7, 8, 9),
+        (np.nan,) * 3,
+        (np.nan,) * 3,
+    ]
     for little_endian in (True, False):
         payloads = [_serialize(m, JOINT_STATE, little_endian=little_endian) for m in messages]
         columns = decode_joint_states(*_batch(payloads), joint="prsm_motor")
         got = np.column_stack([columns["position"], columns["velocity"], columns["effort"]])
         np.testing.assert_array_equal(got, np.array(expected, dtype=float))
-        assert columns["sec"].tolist() == [1] * 6
+        assert columns["sec"].tolist() == [1] * 7
 
 
 def _truth_values(count: int, rollers: int) -> dict[str, np.ndarray]:

@@ -48,6 +48,9 @@ def test_input_sample() -> None:
     torque = input_sample(msg, "prsm_motor", 0.6)
     assert torque.current_a == pytest.approx(2.0)
     assert input_sample(msg, "other", None).problem == "joint_missing"
+    msg.name = ["prsm_motor", "prsm_motor"]
+    assert input_sample(msg, "prsm_motor", None).problem == "joint_repeated"
+    msg.name = ["wheel", "prsm_motor"]
     msg.velocity = [0.0]
     assert input_sample(msg, "prsm_motor", None).problem == "joint_incomplete"
     motor = MotorState(header=header, current_a=1.5, speed_rad_s=-20.0, position_rad=7.0)

@@ -69,6 +69,8 @@ def joint_states(samples: MotorSamples) -> list[Any]:
             msg.effort = [0.0]
         elif 308 <= i < 313:
             msg.effort = [0.0, math.nan]
+        elif 313 <= i < 315:
+            msg.name = ["prsm_motor", "prsm_motor"]
         messages.append(msg)
     return messages
 
@@ -78,6 +80,7 @@ EXPECTED = {
     "malformed_joint": {
         "rejected_joint_missing": "5",
         "rejected_joint_incomplete": "3",
+        "rejected_joint_repeated": "2",
         "rejected_non_finite": "5",
     },
 }
