@@ -35,10 +35,10 @@ class HealthState:
     magnitude. jam_probabilities[k]: probability that k rollers are jammed (sums to 1).
     precision_loss_m and its std, rate [m/s]; friction_torque_nm (magnitude), efficiency
     (paper 002 eq. 19); fatigue_damage (Miner) and its std; screw_speed_rad_s; samples
-    accepted and rejected so far, as judged when the estimate was made: the samples fed
-    with the one that completed its block count too, so these two depend on how the samples
-    were chunked (every other field does not); nis: mean normalised innovation squared over
-    the divergence window (about 1 when the filter is consistent); event.
+    accepted and rejected from the start up to the block's last accepted sample, in input
+    order (:class:`~prsm_health.estimation.inputs.Block`: the same however the samples were
+    chunked); nis: mean normalised innovation squared over the divergence window (about 1
+    when the filter is consistent); event.
     """
 
     stamp_s: float

@@ -230,10 +230,10 @@ class HealthEstimator:
         of ``saved``, an estimate saved with a restored state (the node keeps one), with the
         load and its standard deviation the filters' now (after a restore under other
         parameters they start afresh: the saved load no longer holds), or None."""
+        counters = self._blocker.counters
+        now = self._standing_fields(counters.accepted, counters.rejected_total)
         if self._last is not None:
-            return dataclasses.replace(
-                self._last, event=EstimateEvent.NONE, **self._standing_fields()
-            )
+            return dataclasses.replace(self._last, event=EstimateEvent.NONE, **now)
         if saved is None:
             return None
         weights = [math.exp(h.log_prob) for h in self._bank.hypotheses]  # normalised
@@ -244,7 +244,7 @@ class HealthEstimator:
             axial_load_n=load,
             axial_load_std_n=math.sqrt(load_var),
             event=EstimateEvent.NONE,
-            **self._standing_fields(),
+            **now,
         )
 
     def process(self, samples: MotorSamples) -> list[HealthState]:
@@ -413,7 +413,7 @@ class HealthEstimator:
             efficiency=float(efficiency(geometry, abs(load), friction)),
             screw_speed_rad_s=block.motor_speed_rad_s / self.params.actuator.drive_train.gear_ratio,
             event=event,
-            **self._standing_fields(),
+            **self._standing_fields(block.accepted_so_far, block.rejected_so_far),
         )
 
     def _load_moments(self) -> tuple[list[float], list[float]]:
@@ -427,11 +427,10 @@ class HealthEstimator:
         ]
         return loads, variances
 
-    def _standing_fields(self) -> dict[str, Any]:
+    def _standing_fields(self, samples_accepted: int, samples_rejected: int) -> dict[str, Any]:
         """The fields of an estimate that the estimator's state holds between blocks: jam
-        probabilities, degradation, sample counters and mean NIS (0 while its window is
-        empty); the others describe the block (:meth:`_state`, :meth:`current_state`)."""
-        counters = self._blocker.counters
+        probabilities, degradation, the given sample counters and mean NIS (0 while its window
+        is empty); the others describe the block (:meth:`_state`, :meth:`current_state`)."""
         degradation = self._degradation.state
         nis = self._mean_nis()
         return {
@@ -441,8 +440,8 @@ class HealthEstimator:
             "precision_loss_rate_m_per_s": degradation.rate_m_per_s,
             "fatigue_damage": degradation.fatigue_damage,
             "fatigue_damage_std": self._degradation.fatigue_damage_std,
-            "samples_accepted": counters.accepted,
-            "samples_rejected": counters.rejected_total,
+            "samples_accepted": samples_accepted,
+            "samples_rejected": samples_rejected,
             "nis": nis if math.isfinite(nis) else 0.0,
         }
 

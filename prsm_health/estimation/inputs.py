@@ -33,10 +33,11 @@ from numpy.typing import NDArray
 
 from prsm_health.estimation.params import EstimatorParams
 from prsm_health.physics.meshing import carrier_speed_rad_s
-from prsm_health.signals import MotorSamples
+from prsm_health.signals import BoolArray, FloatArray, IntArray, MotorSamples
 
-FloatArray = NDArray[np.float64]
-BoolArray = NDArray[np.bool_]
+#: Per-sample counts, or one int when every sample has the same (the common case: no
+#: rejection among the pending samples; spares the node's one-sample calls three array ops).
+Counts = IntArray | int
 
 #: A current sample this many noise standard deviations away from both neighbours, which
 #: agree with each other, is a spike.
@@ -78,6 +79,12 @@ class RejectReason(enum.IntEnum):
     STUCK = 4
 
 
+#: Reasons judged as the samples come, one by one in input order.
+ON_ARRIVAL = (RejectReason.NON_FINITE, RejectReason.OUT_OF_RANGE, RejectReason.TIME_BACKWARDS)
+#: Reasons judged on complete blocks (with their neighbours).
+IN_BLOCKS = (RejectReason.SPIKE, RejectReason.STUCK)
+
+
 @dataclass
 class InputCounters:
     """Samples accepted and rejected (by reason) since start, and time events."""
@@ -111,6 +118,9 @@ class Block:
     makes it large; the measurement noise uses it). silence_before_s: time from the previous
     block's last accepted sample to this block's first (a hole in the data: dropouts or
     rejected samples). after_gap, time_reset: the block starts a new time line.
+    accepted_so_far, rejected_so_far: the samples accepted and rejected from the start up to
+    the block's last accepted sample, in input order (the same however the samples were
+    chunked; rejected samples after it count in the next block).
     """
 
     stamp_s: float
@@ -127,6 +137,8 @@ class Block:
     silence_before_s: float = 0.0
     after_gap: bool = False
     time_reset: bool = False
+    accepted_so_far: int = 0
+    rejected_so_far: int = 0
 
 
 def merge_blocks(blocks: list[Block]) -> Block:
@@ -156,6 +168,8 @@ def merge_blocks(blocks: list[Block]) -> Block:
         silence_before_s=blocks[0].silence_before_s,
         after_gap=blocks[0].after_gap,
         time_reset=blocks[0].time_reset,
+        accepted_so_far=blocks[-1].accepted_so_far,
+        rejected_so_far=blocks[-1].rejected_so_far,
     )
 
 
@@ -184,9 +198,12 @@ class SampleBlocker:
         self._last_stamp = -math.inf  # the latest accepted stamp (a held sample's too)
         self._jumped_from = -math.inf  # the stamp the latest accepted one jumped from
         self._held: MotorSamples | None = None  # a last sample that jumped ahead (module doc)
+        self._held_rejected_before = 0  # the samples rejected before it (input order)
         self._backwards_since: float | None = None  # where the jumped-back line started
         self._backwards_samples = 0  # its samples so far
         self._pending = _empty()
+        # Per pending sample: the samples rejected on arrival before it (input order).
+        self._pending_rejected_before: Counts = 0
         self._anchor: float | None = None
         self._last_block_stamp: float | None = None
         self._last_sample_stamp: float | None = None  # the last accepted one in a block
@@ -206,29 +223,42 @@ class SampleBlocker:
 
     def feed(self, samples: MotorSamples) -> list[Block]:
         """Validate ``samples`` and return the blocks they complete (in time order)."""
+        rejected_earlier = self._rejected(ON_ARRIVAL)
         ok = self._in_range(samples)
         held = self._held
         if held is not None:  # accepted so far: what follows decides (module doc)
             samples, ok = MotorSamples.concatenate([held, samples]), np.r_[True, ok]
         ok, resets, jumped = self._advance_time(samples.stamp_s, ok, held=held is not None)
         self._held = None
+        every = bool(ok.all())  # the common case: nothing to select
+        rejected_before: Counts = rejected_earlier
+        if not every or held is not None:  # counted in input order (accepted ones are not)
+            rejected_before = rejected_earlier + np.cumsum(~ok)
+            if held is not None:
+                rejected_before[0] = self._held_rejected_before
         if jumped is not None:  # undecided: held back for the next chunk
             self._held = samples[np.array([jumped])]  # a copy
+            self._held_rejected_before = int(_at(rejected_before, jumped))
             ok[jumped] = False
-        every = bool(ok.all())  # the common case: nothing to select
+            every = False
         blocks: list[Block] = []
         begin = 0
         for reset in [*resets, len(samples)]:
-            part = samples[begin:reset]
-            accepted = part if every else part[ok[begin:reset]]
+            part, part_before = samples[begin:reset], _at(rejected_before, slice(begin, reset))
+            if not every:
+                kept = ok[begin:reset]
+                part, part_before = part[kept], _at(part_before, kept)
+            before = _joined(
+                self._pending_rejected_before, len(self._pending), part_before, len(part)
+            )
             # A copy: pending samples must not alias the caller's arrays.
-            accepted = MotorSamples.concatenate([self._pending, accepted])
+            accepted = MotorSamples.concatenate([self._pending, part])
             if reset < len(samples):  # the old time line ends here: close its blocks
-                blocks += self._blocks(accepted, final=True)
+                blocks += self._blocks(accepted, before, final=True)
                 self._anchor = None
                 self._time_reset = True
             else:
-                blocks += self._blocks(accepted, final=False)
+                blocks += self._blocks(accepted, before, final=False)
             begin = reset
         return blocks
 
@@ -236,14 +266,18 @@ class SampleBlocker:
         """Blocks from the samples still pending. At the end of the data a held sample is
         accepted (nothing came to contradict it); in a pause (``end_of_data`` False: a node
         whose input went silent) it stays held, its verdict open for what comes next."""
-        pending = self._pending
+        pending, before = self._pending, self._pending_rejected_before
         if self._held is not None and end_of_data:
+            before = _joined(before, len(pending), self._held_rejected_before, 1)
             pending, self._held = MotorSamples.concatenate([pending, self._held]), None
-        return self._blocks(pending, final=True)
+        return self._blocks(pending, before, final=True)
 
     # --- per-sample checks --------------------------------------------------------------
     def _count(self, reason: RejectReason, mask: BoolArray) -> None:
         self.counters.rejected[reason] += int(np.count_nonzero(mask))
+
+    def _rejected(self, reasons: tuple[RejectReason, ...]) -> int:
+        return sum(self.counters.rejected[reason] for reason in reasons)
 
     def _in_range(self, samples: MotorSamples) -> BoolArray:
         """Finite, within the drive's current and speed range, stamped within LARGEST_STAMP_S
@@ -369,16 +403,19 @@ class SampleBlocker:
         self._count(RejectReason.STUCK, stuck & ~spikes)
         return np.asarray(spikes | stuck)
 
-    def _blocks(self, pending: MotorSamples, *, final: bool) -> list[Block]:
+    def _blocks(
+        self, pending: MotorSamples, rejected_before: Counts, *, final: bool
+    ) -> list[Block]:
+        """The complete blocks of the ``pending`` samples (``rejected_before``: the samples
+        rejected on arrival before each); the others stay pending."""
+        self._pending, self._pending_rejected_before = pending, rejected_before
         if len(pending) == 0:
-            self._pending = pending
             return []
         period = self._params.filter.block_duration_s
         t = pending.stamp_s
         if self._anchor is None:
             self._anchor = float(t[0])
         if not final and self._no_block_yet(t, period):
-            self._pending = pending
             return []
         # The first pending sample is compared with the last one of the blocks before: a gap
         # may follow a block already closed, or a flush (after a time reset it is earlier).
@@ -402,18 +439,26 @@ class SampleBlocker:
         else:  # close cells that end STUCK_RUN_SAMPLES before the pending end (see above)
             complete = int(np.searchsorted(starts, len(t) - STUCK_RUN_SAMPLES, side="right")) - 1
         if complete <= 0:
-            self._pending = pending
             return []
         end = int(starts[complete]) if complete < len(starts) else len(t)
         self._anchor = float(anchors[end - 1])
         self._last_processed_stamp = float(t[end - 1])
         run = pending[:end]
+        accepted_earlier, rejected_earlier = self.counters.accepted, self._rejected(IN_BLOCKS)
         rejected = self._spikes_and_stuck(pending.current_a, end, final)
         self.counters.accepted += end - int(np.count_nonzero(rejected))
         self._pending = pending[end:]
+        self._pending_rejected_before = _compact(_at(rejected_before, slice(end, None)))
         keep = ~rejected
+        so_far = (
+            accepted_earlier + np.cumsum(keep),
+            _at(rejected_before, slice(None, end)) + rejected_earlier + np.cumsum(rejected),
+        )
         return self._summarise(
-            run[keep], np.cumsum(new_cell[:end])[keep] - 1, gap_before[:end][keep]
+            run[keep],
+            np.cumsum(new_cell[:end])[keep] - 1,
+            gap_before[:end][keep],
+            (so_far[0][keep], so_far[1][keep]),
         )
 
     def _no_block_yet(self, t: FloatArray, period: float) -> bool:
@@ -431,9 +476,14 @@ class SampleBlocker:
         return math.floor((first_t - anchor) / period) == math.floor((last_t - anchor) / period)
 
     def _summarise(
-        self, run: MotorSamples, cell_ids: NDArray[np.int64], gap_before: BoolArray
+        self,
+        run: MotorSamples,
+        cell_ids: NDArray[np.int64],
+        gap_before: BoolArray,
+        so_far: tuple[IntArray, IntArray],
     ) -> list[Block]:
-        """Average each cell's samples into a Block (all cells vectorised)."""
+        """Average each cell's samples into a Block (all cells vectorised). ``so_far``: the
+        samples accepted and rejected up to each sample (input order)."""
         if len(run) == 0:
             return []
         starts = np.flatnonzero(np.r_[True, cell_ids[1:] != cell_ids[:-1]])
@@ -502,12 +552,39 @@ class SampleBlocker:
                     silence_before_s=silence,
                     after_gap=bool(new_line[b]),
                     time_reset=reset,
+                    accepted_so_far=int(so_far[0][last[b]]),
+                    rejected_so_far=int(so_far[1][last[b]]),
                 )
             )
             self._last_block_stamp = float(stamps[b])
             self._last_sample_stamp = float(last_stamps[b])
             self._time_reset = False
         return blocks
+
+
+def _at(counts: Counts, index: int | slice | BoolArray) -> Counts:
+    """``counts[index]``."""
+    return counts if isinstance(counts, int) else counts[index]
+
+
+def _compact(counts: Counts) -> Counts:
+    """``counts`` as one int if they are all the same (counts in input order never fall)."""
+    if isinstance(counts, int) or len(counts) == 0 or counts[0] != counts[-1]:
+        return counts
+    return int(counts[0])
+
+
+def _joined(first: Counts, first_samples: int, second: Counts, second_samples: int) -> Counts:
+    """The counts of ``first_samples`` samples followed by those of ``second_samples``."""
+    if first_samples == 0:
+        return second
+    if second_samples == 0 or (
+        isinstance(first, int) and isinstance(second, int) and first == second
+    ):
+        return first
+    return np.concatenate(
+        (np.broadcast_to(first, first_samples), np.broadcast_to(second, second_samples))
+    )
 
 
 def _empty() -> MotorSamples:

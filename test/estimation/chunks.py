@@ -2,11 +2,9 @@
 
 from __future__ import annotations
 
-import dataclasses
 from collections.abc import Callable
 from typing import TypeVar
 
-from prsm_health.estimation.estimate import HealthState
 from prsm_health.signals import MotorSamples
 
 T = TypeVar("T")
@@ -20,9 +18,3 @@ def fed_in_chunks(
     for start in range(0, len(samples), size):
         out += feed(samples[start : start + size])
     return out
-
-
-def without_counts(states: list[HealthState]) -> list[HealthState]:
-    """``states`` without their sample counts, which are those when the estimate was made:
-    a whole chunk is counted before its first estimate."""
-    return [dataclasses.replace(s, samples_accepted=0, samples_rejected=0) for s in states]

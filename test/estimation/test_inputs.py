@@ -66,6 +66,25 @@ def test_blocks_do_not_depend_on_the_chunking(size: int) -> None:
     assert blocker.counters == ref_blocker.counters
 
 
+def test_each_block_counts_the_samples_up_to_its_last_one() -> None:
+    """A non-finite sample in the second block, a spike in the third, a stamp that does not
+    advance in the fourth: each block counts what came up to its own last accepted sample,
+    whatever came after it in the same chunk (until 2026-11-27 every block of a chunk had the
+    chunk's counts)."""
+    samples = with_values(run(1.0), speed_rad_s=(50, math.nan), current_a=(100, 40.0))
+    samples.stamp_s[130] = samples.stamp_s[129]
+    blocks, blocker = feed_in_chunks(samples, len(samples))
+    accepted = np.cumsum([b.samples for b in blocks])
+    assert [b.accepted_so_far for b in blocks] == accepted.tolist()
+    assert [b.rejected_so_far for b in blocks[:5]] == [0, 1, 2, 3, 3]
+    last = blocks[-1]
+    assert (last.accepted_so_far, last.rejected_so_far) == (
+        blocker.counters.accepted,
+        blocker.counters.rejected_total,
+    )
+    assert blocker.counters.rejected_total == 3
+
+
 def test_blocks_average_the_samples_of_each_grid_cell() -> None:
     samples = run(1.0)
     blocks, blocker = feed_in_chunks(samples, 100)
