@@ -144,7 +144,13 @@ def _build_parser() -> _Parser:
     simulate.add_argument(
         "--exact", action="store_true", help="physics core at every sample (slow), no table"
     )
-    simulate.add_argument("--out", required=True, type=Path, metavar="PATH", help="bag directory")
+    simulate.add_argument(
+        "--out",
+        required=True,
+        type=Path,
+        metavar="PATH",
+        help="bag directory (a bare MCAP file if PATH ends in .mcap)",
+    )
     simulate.add_argument("--force", action="store_true", help="replace an existing bag at PATH")
 
     model_demo = commands.add_parser(
@@ -259,7 +265,11 @@ def _check_room(samples: int, *, joint_states: bool, out: Path) -> None:
 
 
 def _remove_bag(path: Path) -> None:
-    """Delete the bag directory ``path`` (--force); refuse anything that is not a bag."""
+    """Delete the bag directory or bare ``.mcap`` file ``path`` (--force); refuse anything
+    that is not a bag."""
+    if path.suffix == ".mcap" and path.is_file() and not path.is_symlink():
+        path.unlink()
+        return
     files = list(path.iterdir()) if path.is_dir() else []
     if not files or any(f.name != "metadata.yaml" and f.suffix != ".mcap" for f in files):
         raise ValueError(f"--force: {path} is not a bag directory (metadata.yaml, *.mcap)")

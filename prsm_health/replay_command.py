@@ -66,7 +66,8 @@ def add_replay_command(commands: Any) -> None:
         "--out",
         type=Path,
         metavar="OUT",
-        help="write a bag directory with the inputs, health and diagnostics",
+        help="write a bag directory (a bare MCAP file if OUT ends in .mcap) with the inputs, "
+        "health and diagnostics",
     )
     parser.add_argument("--report", type=Path, metavar="DIR", help="write PNG plots and index")
     parser.add_argument(

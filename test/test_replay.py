@@ -111,6 +111,20 @@ def test_replay_estimates_scores_and_writes_what_the_node_publishes(
     assert hardware_ids == {SPECS["hardware_id"].default}
 
 
+def test_cli_out_ending_in_mcap_writes_the_bag_as_a_bare_mcap_file(
+    bag: Path, tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    """``--out OUT.mcap`` (the issue's usage, what Foxglove opens): the MCAP of ``--out OUT``,
+    byte for byte. It was refused, since a bag is a directory."""
+    directory, bare = tmp_path / "out", tmp_path / "out.mcap"
+    assert main(["replay", str(bag), "--out", str(directory)]) == 0
+    assert main(["replay", str(bag), "--out", str(bare)]) == 0
+    assert f"wrote bag {bare}" in capsys.readouterr().out
+    assert bare.read_bytes() == (directory / "out.mcap").read_bytes()
+    topics = {m.channel.topic for m in read_ros2_messages(bare)}
+    assert {HEALTH_TOPIC, DIAGNOSTICS_TOPIC, TRUTH_TOPIC, "/motor_state"} <= topics
+
+
 def test_joint_state_input_gives_the_same_estimates(bag: Path) -> None:
     from_motor_state = replay(bag, params())
     from_joint_states = replay(bag, params(), topics=InputTopics(joint_states="/joint_states"))
@@ -233,11 +247,16 @@ def test_ctrl_c_ends_the_replay_with_what_was_read(
     assert signal.getsignal(signal.SIGINT) is signal.default_int_handler
 
 
+@pytest.mark.parametrize("name", ["out", "out.mcap"])
 def test_a_second_ctrl_c_aborts_and_removes_the_incomplete_output(
-    tmp_path: Path, capsys: pytest.CaptureFixture[str], monkeypatch: pytest.MonkeyPatch
+    name: str,
+    tmp_path: Path,
+    capsys: pytest.CaptureFixture[str],
+    monkeypatch: pytest.MonkeyPatch,
 ) -> None:
     """Two SIGINTs while the first chunk is written: it was a traceback and an output bag
-    without metadata.yaml that made the rerun fail ("--out: ... exists")."""
+    without metadata.yaml that made the rerun fail ("--out: ... exists"). The same for a
+    bare MCAP file, and its working directory goes too."""
     real = replay_command.replay
 
     def aborted(*args: Any, progress: Callable[[int], None], **kwargs: Any) -> ReplayResult:
@@ -250,16 +269,18 @@ def test_a_second_ctrl_c_aborts_and_removes_the_incomplete_output(
         return real(*args, progress=then_ctrl_c_twice, **kwargs)
 
     monkeypatch.setattr(replay_command, "replay", aborted)
-    out = tmp_path / "out"
+    out = tmp_path / name
     argv = ["replay", str(BUNDLED_BAGS / "sudden-jam"), "--out", str(out)]
     assert main(argv) == 130
     assert capsys.readouterr().err.splitlines()[-2:] == [
         f"removed the incomplete {out}",
         "prsm-health: aborted by Ctrl-C",
     ]
-    assert not out.exists()
+    assert list(tmp_path.iterdir()) == []
     monkeypatch.setattr(replay_command, "replay", real)
-    assert main(argv) == 0 and (out / "metadata.yaml").is_file()  # the rerun
+    assert main(argv) == 0  # the rerun
+    assert len(read_motor_samples(out, InputTopics())) == 60_000
+    assert [p.name for p in tmp_path.iterdir()] == [name]
 
 
 def test_cli_refuses_a_missing_bag_and_bad_params_in_one_line(

@@ -20,6 +20,7 @@ described in :mod:`prsm_health.bags.stamps`.
 
 from __future__ import annotations
 
+import shutil
 from collections.abc import Mapping, Sequence
 from io import BytesIO
 from pathlib import Path
@@ -81,21 +82,30 @@ class BagWriter:
 
     Args:
         path: bag directory to create; the MCAP file inside is ``<name>/<name>.mcap``. A
-            name ending in ``.mcap`` is refused (BagError): it would be a directory holding
-            ``<name>.mcap.mcap``, not the MCAP file the name promises.
+            path ending in ``.mcap`` is a bare MCAP file instead (what Foxglove opens; the
+            readers here take it too): the same bytes as the ``.mcap`` of a bag directory
+            ``<stem>``, written as one in the hidden directory ``.<name>.writing`` beside it,
+            whose MCAP is moved to ``path`` when the writer is left (incomplete after an
+            exception) and ``metadata.yaml`` dropped (the MCAP carries it too).
         compress: zstd-compress the MCAP chunks (default); False writes them uncompressed.
     """
 
     def __init__(self, path: str | Path, *, compress: bool = True) -> None:
         self.path = Path(path)
+        directory = self.path
+        self._working: Path | None = None  # where a bare .mcap file is written as a bag
         if self.path.suffix == ".mcap":
-            raise BagError(
-                self.path,
-                "a bag is written as a directory NAME holding metadata.yaml and NAME.mcap: give "
-                f"its name without .mcap, e.g. {self.path.with_suffix('')}",
-            )
+            if self.path.exists() or self.path.is_symlink():
+                raise BagError(self.path, "exists already, not overwriting")
+            self._working = self.path.parent / f".{self.path.name}.writing"
+            if self._working.exists():
+                raise BagError(
+                    self.path,
+                    f"{self._working} is left from a write that was killed: remove it first",
+                )
+            directory = self._working / self.path.stem
         try:
-            self._writer = _Writer(self.path, version=9, storage_plugin=StoragePlugin.MCAP)
+            self._writer = _Writer(directory, version=9, storage_plugin=StoragePlugin.MCAP)
         except WriterError as exc:
             raise BagError(self.path, f"cannot create the bag: {exc}") from exc
         if compress:
@@ -107,6 +117,7 @@ class BagWriter:
         try:
             self._writer.open()
         except (WriterError, OSError) as exc:
+            self._bare_file()
             raise BagError(self.path, f"cannot create the bag: {exc}") from exc
         self._open = True
         return self
@@ -120,12 +131,24 @@ class BagWriter:
         self._open = False
         if exc_type is not None:
             self._writer.abort()
+            self._bare_file()
             return
         try:
             self._writer.close()
         except BaseException:
             self._writer.abort()
             raise
+        finally:
+            self._bare_file()
+
+    def _bare_file(self) -> None:
+        """For a bare ``.mcap`` path: its MCAP moved there, the working directory removed."""
+        if self._working is None:
+            return
+        written = self._working / self.path.stem / f"{self.path.stem}.mcap"
+        if written.exists():
+            written.replace(self.path)
+        shutil.rmtree(self._working, ignore_errors=True)
 
     @property
     def topics(self) -> dict[str, str]:

@@ -12,7 +12,9 @@ from mcap.reader import make_reader
 from mcap_ros2.decoder import DecoderFactory
 from rosbags.rosbag2 import Reader
 
+from prsm_health.bags.bagfiles import custom_data
 from prsm_health.bags.errors import BagError
+from prsm_health.bags.reader import InputTopics, read_motor_samples
 from prsm_health.bags.stamps import log_times_from_stamps, seconds_to_stamps
 from prsm_health.bags.typestore import GROUND_TRUTH, JOINT_STATE, MOTOR_STATE, typestore
 from prsm_health.bags.writer import LIBRARY, BagWriter, write_motor_states
@@ -190,6 +192,43 @@ def test_single_messages_and_raw_cdr(tmp_path: Path) -> None:
     assert all(m == message for _, m in got)
 
 
+def test_a_path_ending_in_mcap_is_a_bare_mcap_file(tmp_path: Path) -> None:
+    """The same bytes as the MCAP of a bag directory of its stem, read back by our reader and
+    its custom data with it, nothing left beside it. (Until 2026-11-27 such a path was
+    refused: it had made a directory holding out.mcap/out.mcap.mcap.)"""
+    motor = motor_samples(500)
+    bag = write_bag(tmp_path / "dir" / "out", motor=motor)
+    bare = write_bag(tmp_path / "out.mcap", motor=motor)
+    assert bare.is_file() and bare.read_bytes() == mcap_file(bag).read_bytes()
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["dir", "out.mcap"]
+    back = read_motor_samples(bare, InputTopics())
+    np.testing.assert_array_equal(back.current_a, motor.current_a)
+    deep = tmp_path / "a" / "b" / "c.mcap"  # its folders are made, as a bag directory's
+    with BagWriter(deep) as writer:
+        writer.set_custom_data("scene", "x")
+        write_motor_states(writer, motor)
+    assert custom_data(deep) == {"scene": "x"}
+    with pytest.raises(BagError, match=r"out.mcap: exists already, not overwriting"):
+        BagWriter(bare)
+
+
+def test_a_bare_mcap_file_cut_by_an_error_is_left_as_a_recorder_leaves_it(
+    tmp_path: Path,
+) -> None:
+    """An exception inside the writer leaves the MCAP written so far at the path (incomplete:
+    no summary), as a crashed recorder leaves its file, and no working directory; one that a
+    killed process left is named."""
+    path = tmp_path / "cut.mcap"
+    with pytest.raises(RuntimeError), BagWriter(path) as writer:
+        write_motor_states(writer, motor_samples(5000))
+        raise RuntimeError
+    assert path.is_file() and path.read_bytes().startswith(b"\x89MCAP0\r\n")
+    assert [p.name for p in tmp_path.iterdir()] == ["cut.mcap"]
+    (tmp_path / ".left.mcap.writing").mkdir()
+    with pytest.raises(BagError, match=r"left.mcap.writing is left from a write that was killed"):
+        BagWriter(tmp_path / "left.mcap")
+
+
 def test_writer_errors_name_the_bag(tmp_path: Path) -> None:
     (tmp_path / "exists").mkdir()
     with (
@@ -197,12 +236,6 @@ def test_writer_errors_name_the_bag(tmp_path: Path) -> None:
         BagWriter(tmp_path / "exists"),
     ):
         pass
-    # A name of an MCAP file made a directory holding out.mcap/out.mcap.mcap.
-    with pytest.raises(
-        BagError, match=rf"out.mcap: a bag is written as a directory .* {tmp_path / 'out'}$"
-    ):
-        BagWriter(tmp_path / "out.mcap")
-    assert not (tmp_path / "out.mcap").exists()
     bag = tmp_path / "bag"
     with BagWriter(bag) as writer:
         writer.add_topic("/m", MOTOR_STATE)

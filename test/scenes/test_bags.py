@@ -138,6 +138,13 @@ def test_simulate_writes_joint_states_and_refuses_to_overwrite(
     )
     assert "not a bag directory" in capsys.readouterr().err
     assert (tmp_path / "notes" / "keep.txt").exists()
+    # A bare MCAP file (docs/bags.md), replaced with --force like a bag directory.
+    bare = tmp_path / "short.mcap"
+    argv = ["simulate", "--scene", "nominal-downhole", "--duration", "1", "--out", str(bare)]
+    assert main(argv) == 0 and bare.is_file()
+    assert main(argv) == 2
+    assert main([*argv[:-3], "2", "--out", str(bare), "--force"]) == 0
+    assert len(read_motor_samples(bare)) == 2000
 
 
 def test_simulate_reports_a_bad_scene_in_one_line(
