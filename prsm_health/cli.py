@@ -26,6 +26,7 @@ from typing import Any, NoReturn
 
 from tqdm import tqdm
 
+from prsm_health.bags.mcap_scan import MAGIC
 from prsm_health.bench_command import add_bench_command
 from prsm_health.interrupt import EXIT_INTERRUPTED, removed_on_abort, stop_on_interrupt
 from prsm_health.node_params import add_node_params_command
@@ -266,8 +267,13 @@ def _check_room(samples: int, *, joint_states: bool, out: Path) -> None:
 
 def _remove_bag(path: Path) -> None:
     """Delete the bag directory or bare ``.mcap`` file ``path`` (--force); refuse anything
-    that is not a bag."""
-    if path.suffix == ".mcap" and path.is_file() and not path.is_symlink():
+    that is not a bag (a symbolic link too: what it points to is not ours to delete)."""
+    if path.is_symlink():
+        raise ValueError(f"--force: {path} is a symbolic link, not a bag (not removed)")
+    if path.suffix == ".mcap" and path.is_file():
+        with path.open("rb") as stream:
+            if stream.read(len(MAGIC)) != MAGIC:
+                raise ValueError(f"--force: {path} is not an MCAP file (not removed)")
         path.unlink()
         return
     files = list(path.iterdir()) if path.is_dir() else []

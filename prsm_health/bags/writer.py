@@ -20,6 +20,7 @@ described in :mod:`prsm_health.bags.stamps`.
 
 from __future__ import annotations
 
+import os
 import shutil
 from collections.abc import Mapping, Sequence
 from io import BytesIO
@@ -36,6 +37,7 @@ from rosbags.rosbag2.storage_mcap import McapWriter, write_record, write_string
 
 from prsm_health.bags.codecs import encode_joint_states, encode_motor_states, encode_truth
 from prsm_health.bags.errors import BagError
+from prsm_health.bags.mcap_scan import MAGIC
 from prsm_health.bags.stamps import (
     StampRangeError,
     UInt64Array,
@@ -49,7 +51,6 @@ from prsm_health.signals import MotorSamples, TruthSamples
 #: ``library`` field of the MCAP header (instead of rosbags' ``rosbags-<version>``).
 LIBRARY = "prsm_health.bags (rosbags MCAP writer)"
 MAX_LOG_TIME_NS = 2**63 - 2
-MCAP_MAGIC = b"\x89MCAP0\r\n"
 
 
 class _McapStorage(McapWriter):
@@ -61,7 +62,7 @@ class _McapStorage(McapWriter):
         # go to an in-memory chunk until it is full): write them again with our library name.
         self.bio.seek(0)
         self.bio.truncate()
-        self.bio.write(MCAP_MAGIC)
+        self.bio.write(MAGIC)
         record = BytesIO()
         write_string(record, "ros2")
         write_string(record, LIBRARY)
@@ -85,8 +86,8 @@ class BagWriter:
             path ending in ``.mcap`` is a bare MCAP file instead (what Foxglove opens; the
             readers here take it too): the same bytes as the ``.mcap`` of a bag directory
             ``<stem>``, written as one in the hidden directory ``.<name>.writing`` beside it,
-            whose MCAP is moved to ``path`` when the writer is left (incomplete after an
-            exception) and ``metadata.yaml`` dropped (the MCAP carries it too).
+            whose MCAP is linked to ``path`` when the writer is left (incomplete after an
+            exception) and the rest removed (``metadata.yaml``: the MCAP carries it too).
         compress: zstd-compress the MCAP chunks (default); False writes them uncompressed.
     """
 
@@ -95,13 +96,19 @@ class BagWriter:
         directory = self.path
         self._working: Path | None = None  # where a bare .mcap file is written as a bag
         if self.path.suffix == ".mcap":
-            if self.path.exists() or self.path.is_symlink():
-                raise BagError(self.path, "exists already, not overwriting")
             self._working = self.path.parent / f".{self.path.name}.writing"
-            if self._working.exists():
+            try:
+                taken = self.path.exists() or self.path.is_symlink()
+                left = self._working.exists()
+            except OSError as exc:  # e.g. a name too long for the working directory's
+                raise BagError(self.path, f"cannot create the bag: {exc}") from exc
+            if taken:
+                raise BagError(self.path, "exists already, not overwriting")
+            if left:
                 raise BagError(
                     self.path,
-                    f"{self._working} is left from a write that was killed: remove it first",
+                    f"{self._working} is left from a write that was killed (or another is "
+                    "writing this file): remove it first",
                 )
             directory = self._working / self.path.stem
         try:
@@ -115,9 +122,16 @@ class BagWriter:
 
     def __enter__(self) -> BagWriter:
         try:
+            if self._working is not None:
+                # Made here, never reused: a second writer of the same file fails now.
+                self._working.mkdir(parents=True)
+        except OSError as exc:
+            raise BagError(self.path, f"cannot create the bag: {exc}") from exc
+        try:
             self._writer.open()
         except (WriterError, OSError) as exc:
-            self._bare_file()
+            if self._working is not None:
+                shutil.rmtree(self._working, ignore_errors=True)
             raise BagError(self.path, f"cannot create the bag: {exc}") from exc
         self._open = True
         return self
@@ -131,23 +145,35 @@ class BagWriter:
         self._open = False
         if exc_type is not None:
             self._writer.abort()
-            self._bare_file()
+            self._bare_file(failing=True)
             return
         try:
             self._writer.close()
         except BaseException:
             self._writer.abort()
+            self._bare_file(failing=True)
             raise
-        finally:
-            self._bare_file()
+        self._bare_file(failing=False)
 
-    def _bare_file(self) -> None:
-        """For a bare ``.mcap`` path: its MCAP moved there, the working directory removed."""
+    def _bare_file(self, *, failing: bool) -> None:
+        """For a bare ``.mcap`` path: its MCAP linked there and the working directory removed.
+
+        A hard link never replaces what appeared at the path while the bag was written; then
+        (or on a file system without hard links) the bag stays in the working directory,
+        named in a BagError, or, ``failing`` (an exception is on its way), silently.
+        """
         if self._working is None:
             return
         written = self._working / self.path.stem / f"{self.path.stem}.mcap"
         if written.exists():
-            written.replace(self.path)
+            try:
+                os.link(written, self.path)
+            except OSError as exc:
+                if failing:
+                    return
+                raise BagError(
+                    self.path, f"not written there ({exc.strerror}): the bag is {written}"
+                ) from exc
         shutil.rmtree(self._working, ignore_errors=True)
 
     @property

@@ -229,6 +229,34 @@ def test_a_bare_mcap_file_cut_by_an_error_is_left_as_a_recorder_leaves_it(
         BagWriter(tmp_path / "left.mcap")
 
 
+def test_a_bare_mcap_file_never_replaces_or_takes_what_another_wrote(tmp_path: Path) -> None:
+    """A file that appears at the path during the write is kept (the bag stays in the working
+    directory, named); a second writer of the same path fails without touching the first's
+    work; a name too long for the working directory is a BagError. (Found in review: the
+    first was replaced, the second moved the first writer's partial file and removed its
+    directory, the third was an OSError traceback.)"""
+    path = tmp_path / "t.mcap"
+    refused = r"t.mcap: not written there \(File exists\): the bag is"
+    with pytest.raises(BagError, match=refused), BagWriter(path) as writer:
+        write_motor_states(writer, motor_samples(100))
+        path.write_text("mine")
+    assert path.read_text() == "mine"
+    left = tmp_path / ".t.mcap.writing" / "t" / "t.mcap"
+    assert len(read_motor_samples(left, InputTopics())) == 100
+
+    two = tmp_path / "two.mcap"
+    first, second = BagWriter(two), BagWriter(two)
+    with first:
+        write_motor_states(first, motor_samples(100))
+        with pytest.raises(BagError, match=r"two.mcap: cannot create the bag: .*File exists"):
+            second.__enter__()
+    assert len(read_motor_samples(two, InputTopics())) == 100
+    assert sorted(p.name for p in tmp_path.iterdir()) == [".t.mcap.writing", "t.mcap", "two.mcap"]
+
+    with pytest.raises(BagError, match=r"cannot create the bag: .*File name too long"):
+        BagWriter(tmp_path / f"{'a' * 245}.mcap")
+
+
 def test_writer_errors_name_the_bag(tmp_path: Path) -> None:
     (tmp_path / "exists").mkdir()
     with (

@@ -145,6 +145,19 @@ def test_simulate_writes_joint_states_and_refuses_to_overwrite(
     assert main(argv) == 2
     assert main([*argv[:-3], "2", "--out", str(bare), "--force"]) == 0
     assert len(read_motor_samples(bare)) == 2000
+    # --force removes bags only: not a file that is no MCAP, not what a link points to (the
+    # bag behind a link was deleted, then the link's rmdir failed with a traceback).
+    capsys.readouterr()
+    notes = tmp_path / "notes.mcap"
+    notes.write_text("mine", encoding="utf-8")
+    assert main([*argv[:-1], str(notes), "--force"]) == 2
+    assert "notes.mcap is not an MCAP file (not removed)" in capsys.readouterr().err
+    assert notes.read_text(encoding="utf-8") == "mine"
+    for name, target in (("link", out), ("link.mcap", bare)):
+        (tmp_path / name).symlink_to(target)
+        assert main([*argv[:-1], str(tmp_path / name), "--force"]) == 2
+        assert "is a symbolic link, not a bag (not removed)" in capsys.readouterr().err
+    assert len(read_motor_samples(out)) == 3000 and len(read_motor_samples(bare)) == 2000
 
 
 def test_simulate_reports_a_bad_scene_in_one_line(
