@@ -27,6 +27,7 @@ from typing import Any, NoReturn
 from tqdm import tqdm
 
 from prsm_health.bags.mcap_scan import MAGIC
+from prsm_health.bags.writer import working_directory
 from prsm_health.bench_command import add_bench_command
 from prsm_health.interrupt import EXIT_INTERRUPTED, removed_on_abort, stop_on_interrupt
 from prsm_health.node_params import add_node_params_command
@@ -284,6 +285,19 @@ def _remove_bag(path: Path) -> None:
     path.rmdir()
 
 
+def _remove_killed_write(out: Path) -> None:
+    """--force: the working directory that a killed write of the bare MCAP file ``out`` left
+    (one bag directory in it), which BagWriter would otherwise refuse to reuse."""
+    working = working_directory(out)
+    if out.suffix != ".mcap" or working.is_symlink() or not working.is_dir():
+        return
+    inside = list(working.iterdir())
+    if [p.name for p in inside] != [out.stem]:
+        raise ValueError(f"--force: {working} holds more than a bag (not removed)")
+    _remove_bag(inside[0])
+    working.rmdir()
+
+
 def _run_simulate(args: argparse.Namespace) -> int:
     scene = load_scene(args.scene)
     overrides = {
@@ -306,6 +320,8 @@ def _run_simulate(args: argparse.Namespace) -> int:
         if not args.force:
             raise ValueError(f"{args.out} exists (use --force to replace a bag)")
         _remove_bag(args.out)
+    if args.force:
+        _remove_killed_write(args.out)
     simulator = Simulator(scene, exact=True if args.exact else None)
     with (
         stop_on_interrupt() as stop,

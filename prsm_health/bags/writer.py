@@ -73,6 +73,11 @@ class _Writer(Writer):
     STORAGE_PLUGINS = {StoragePlugin.MCAP: _McapStorage}  # noqa: RUF012 - as in rosbags
 
 
+def working_directory(path: Path) -> Path:
+    """Where :class:`BagWriter` writes the bare MCAP file ``path`` as a bag first."""
+    return path.parent / f".{path.name}.writing"
+
+
 class BagWriter:
     """A rosbag2 bag being written: MCAP, version 9, zstd-compressed chunks (module docstring).
 
@@ -96,7 +101,7 @@ class BagWriter:
         directory = self.path
         self._working: Path | None = None  # where a bare .mcap file is written as a bag
         if self.path.suffix == ".mcap":
-            self._working = self.path.parent / f".{self.path.name}.writing"
+            self._working = working_directory(self.path)
             try:
                 taken = self.path.exists() or self.path.is_symlink()
                 left = self._working.exists()

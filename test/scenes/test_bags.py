@@ -158,6 +158,14 @@ def test_simulate_writes_joint_states_and_refuses_to_overwrite(
         assert main([*argv[:-1], str(tmp_path / name), "--force"]) == 2
         assert "is a symbolic link, not a bag (not removed)" in capsys.readouterr().err
     assert len(read_motor_samples(out)) == 3000 and len(read_motor_samples(bare)) == 2000
+    # What a killed write of a bare file leaves: refused, then removed with --force.
+    killed = tmp_path / ".short.mcap.writing" / "short"
+    killed.mkdir(parents=True)
+    bare.replace(killed / "short.mcap")
+    assert main(argv) == 2
+    assert ".short.mcap.writing is left from a write that was killed" in capsys.readouterr().err
+    assert main([*argv, "--force"]) == 0
+    assert not killed.parent.exists() and len(read_motor_samples(bare)) == 1000
 
 
 def test_simulate_reports_a_bad_scene_in_one_line(
