@@ -158,6 +158,10 @@ def _check_outputs(args: argparse.Namespace) -> None:
     for (first, a), (second, b) in itertools.combinations(outputs.items(), 2):
         if a == b or a in b.parents or b in a.parents:
             raise ValueError(f"{second}: {b} overlaps {first} {a}")
+    bag = args.bag.resolve()
+    for option, path in outputs.items():  # a metrics file written over the bag's .mcap
+        if path == bag or bag in path.parents:
+            raise ValueError(f"{option}: {path} is in the bag being replayed, {bag}")
     if args.out is not None and args.out.exists():
         raise ValueError(f"--out: {args.out} exists")
     if args.report is not None and args.report.exists() and not args.report.is_dir():

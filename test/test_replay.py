@@ -323,6 +323,14 @@ def test_cli_checks_output_paths_before_the_replay_and_makes_the_metrics_folder(
     captured = capsys.readouterr()
     assert captured.out == "" and "--metrics-json: cannot make the folder" in captured.err
 
+    # Nothing is written into the bag being replayed (a metrics file overwrote its .mcap).
+    mcap = bag / f"{bag.name}.mcap"
+    before = mcap.read_bytes()
+    for option, path in (("--metrics-json", mcap), ("--report", bag / "report")):
+        assert main(["replay", str(bag), option, str(path)]) == 2
+        assert f"{option}: {path} is in the bag being replayed" in capsys.readouterr().err
+    assert mcap.read_bytes() == before and not (bag / "report").exists()
+
     metrics = tmp_path / "new" / "folder" / "metrics.json"
     assert main(["replay", str(bag), "--metrics-json", str(metrics)]) == 0
     assert json.loads(metrics.read_text())["jams"]
