@@ -349,7 +349,12 @@ def summary(bag: Path, source: str, result: ReplayResult) -> str:
             f"{last.fatigue_damage:.3g}",
         ]
     metrics = result.metrics
-    if metrics is not None:
+    if metrics is not None and metrics.estimates_beyond_truth >= len(result.states):
+        lines.append(
+            f"  vs truth: nothing scored: the {metrics.estimates_beyond_truth} estimates lie "
+            "outside the truth's span (stamped on another clock?)"
+        )
+    elif metrics is not None:
         delays = ", ".join(
             "never" if j.delay_s is None else f"{j.delay_s:.2f} s" for j in metrics.jams
         )
@@ -377,10 +382,11 @@ def summary(bag: Path, source: str, result: ReplayResult) -> str:
                 f"(max {metrics.load_standstill_max_error_n:.0f} N), truth within 2 sigma "
                 f"{100 * metrics.load_standstill_coverage_2sigma:.0f} % of its estimates"
             )
-        lines += [
-            f"  jams: {jams}, false declarations {metrics.false_jam_declarations}; {loss}, "
-            f"2-sigma coverage {100 * metrics.precision_loss_coverage_2sigma:.0f} %",
-        ]
+        coverage = metrics.precision_loss_coverage_2sigma
+        lines.append(
+            f"  jams: {jams}, false declarations {metrics.false_jam_declarations}; {loss}"
+            + (f", 2-sigma coverage {100 * coverage:.0f} %" if math.isfinite(coverage) else "")
+        )
         if metrics.estimates_beyond_truth:
             lines.append(
                 f"  {metrics.estimates_beyond_truth} estimates outside the truth's span are "

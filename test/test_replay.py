@@ -24,6 +24,7 @@ from rosbags.rosbag2 import Reader
 from prsm_health import replay as replay_module
 from prsm_health import replay_command
 from prsm_health.bags import MOTOR_STATE, InputTopics, read_motor_samples, read_truth
+from prsm_health.bags.bagfiles import custom_data
 from prsm_health.bags.topics import DIAGNOSTICS_TOPIC, HEALTH_TOPIC, TRUTH_TOPIC
 from prsm_health.bags.typestore import typestore
 from prsm_health.bags.writer import BagWriter, write_motor_states, write_truth
@@ -110,6 +111,26 @@ def test_replay_estimates_scores_and_writes_what_the_node_publishes(
         for status in message.ros_msg.status
     }
     assert hardware_ids == {SPECS["hardware_id"].default}
+
+
+def test_the_summary_says_when_no_estimate_lies_on_the_truths_clock(
+    bag: Path, tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    """Inputs stamped on the epoch, the truth from 0: nothing can be scored, and the summary
+    says so in one line. (It printed "jams: none" for a truth with a jam and a coverage of
+    "nan %"; found by a review session.)"""
+    motor, truth = read_motor_samples(bag, InputTopics()), read_truth(bag)
+    epoch = tmp_path / "epoch"
+    with BagWriter(epoch) as writer:
+        for key, value in custom_data(bag).items():  # the scene's actuator
+            writer.set_custom_data(key, value)
+        write_motor_states(writer, dataclasses.replace(motor, stamp_s=motor.stamp_s + 1.7e9))
+        write_truth(writer, truth)
+    assert main(["replay", str(epoch)]) == 0
+    out = capsys.readouterr().out
+    estimates = len(replay(epoch, params()).states)
+    assert f"vs truth: nothing scored: the {estimates} estimates lie outside the truth's" in out
+    assert "nan" not in out and "jams:" not in out
 
 
 def test_the_output_bag_gives_back_the_inputs_in_their_order(tmp_path: Path) -> None:
