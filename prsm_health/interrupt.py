@@ -50,10 +50,18 @@ def removed_on_abort(output: Path | None) -> Iterator[None]:
     try:
         yield
     except KeyboardInterrupt:
-        if output is not None and (output.exists() or output.is_symlink()):
-            if output.is_dir() and not output.is_symlink():
-                shutil.rmtree(output, ignore_errors=True)
-            else:
-                output.unlink(missing_ok=True)
+        if output is not None and remove_output(output):
             print(f"removed the incomplete {output}", file=sys.stderr)
         raise
+
+
+def remove_output(output: Path) -> bool:
+    """Remove the bag (directory or file) ``output`` that this run wrote; False if there is
+    none."""
+    if not (output.exists() or output.is_symlink()):
+        return False
+    if output.is_dir() and not output.is_symlink():
+        shutil.rmtree(output, ignore_errors=True)
+    else:
+        output.unlink(missing_ok=True)
+    return True

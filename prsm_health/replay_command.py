@@ -35,7 +35,12 @@ from prsm_health.estimation.params import (
     load_params_mapping,
     params_from_mapping,
 )
-from prsm_health.interrupt import EXIT_INTERRUPTED, removed_on_abort, stop_on_interrupt
+from prsm_health.interrupt import (
+    EXIT_INTERRUPTED,
+    remove_output,
+    removed_on_abort,
+    stop_on_interrupt,
+)
 from prsm_health.outputs import DEFAULT_HARDWARE_ID, hardware_id_problem
 from prsm_health.replay import ReplayResult, replay
 from prsm_health.scenes.recording import (
@@ -227,7 +232,11 @@ def run_replay(args: argparse.Namespace) -> int:
         why = f"no sample of {args.bag} accepted: {_rejected_why(args.bag, topics, result)}"
         if result.damage is not None:  # the damage says more than what it left
             print(f"  {why}")
+            if written:
+                print(f"  wrote {', '.join(written)}")
             return 1
+        if args.out is not None and remove_output(args.out):  # else it blocks the rerun
+            why += f" (the output bag {args.out} is not kept)"
         raise ValueError(why)
     # The outputs first, the summary after them: a reader that leaves early (``| head``)
     # must not cost the files.
@@ -352,7 +361,8 @@ def summary(bag: Path, source: str, result: ReplayResult) -> str:
     if metrics is not None and metrics.estimates_beyond_truth >= len(result.states):
         lines.append(
             f"  vs truth: nothing scored: the {metrics.estimates_beyond_truth} estimates lie "
-            "outside the truth's span (stamped on another clock?)"
+            "outside the truth's span"
+            + (" (stamped on another clock?)" if result.damage is None else "")
         )
     elif metrics is not None:
         delays = ", ".join(

@@ -381,11 +381,14 @@ def test_cli_says_when_no_sample_matches_the_joint_name_and_what_is_skipped(
     bag: Path, tmp_path: Path, capsys: pytest.CaptureFixture[str]
 ) -> None:
     argv = ["replay", str(bag), "--joint-states", "/joint_states", "--joint-name", "wrong"]
-    assert main(argv) == 2
+    out = tmp_path / "out.mcap"
+    assert main([*argv, "--out", str(out)]) == 2
     captured = capsys.readouterr()
     assert "rejected" in captured.out  # the summary first
     assert "'wrong'" in captured.err and "'prsm_motor'" in captured.err
     assert "rejected as non_finite" in captured.err
+    # The output of a failed replay is not left behind to block the rerun (found in review).
+    assert f"(the output bag {out} is not kept)" in captured.err and not out.exists()
 
     no_truth = tmp_path / "no-truth"
     with BagWriter(no_truth) as writer:
@@ -417,9 +420,11 @@ def test_cli_reports_damage_first_when_nothing_before_it_was_accepted(
     shutil.copytree(bag, damaged)
     mcap = next(damaged.glob("*.mcap"))
     mcap.write_bytes(mcap.read_bytes()[:100])
-    assert main(["replay", str(damaged)]) == 1
+    written = tmp_path / "out"
+    assert main(["replay", str(damaged), "--out", str(written)]) == 1
     out = capsys.readouterr().out
     assert "DAMAGED" in out and "no sample of" in out
+    assert out.splitlines()[-1] == f"  wrote bag {written}"  # it was written, not said
 
 
 def test_a_truth_with_a_non_finite_value_is_scored_up_to_it(
@@ -452,7 +457,7 @@ def test_a_truth_with_a_non_finite_value_is_scored_up_to_it(
         write_truth(writer, dataclasses.replace(truth, axial_load_n=load))
     assert main(["replay", str(early), "--scene", "sudden-jam"]) == 1
     out = capsys.readouterr().out
-    assert "DAMAGED" in out and "outside the truth's span are not scored" in out
+    assert "DAMAGED" in out and "estimates lie outside the truth's span\n" in out
 
 
 def test_metrics_that_cannot_be_computed_are_null_in_the_json(
