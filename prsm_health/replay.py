@@ -307,12 +307,17 @@ class _Output:
         self._diagnostics.events.observe(now, states, counters)
         self._diagnostics.events.non_finite(now, replaced)
         due, written = self._diagnostics_due_s, self._diagnostics_written_s
-        if due is None or now < due - DIAGNOSTICS_PERIOD_S:
-            # The first, or the bag's clock went back: a schedule on the new time line.
+        if due is None or (written is not None and now < written):
+            # The first, or the inputs' clock went back (a time reset: accepted stamps only
+            # go back there): a schedule on the new time line. (Tested against the schedule
+            # instead, a write up to a quarter period early looked like one, and was repeated
+            # by the next piece: pairs 0.1 s apart at 10 kHz, twice the last at the end.)
             due = now
-        # A piece ends about every half period: one that ends less than half a piece before
-        # the grid's time is due (else it waited a piece more: 1.5 s between two).
-        early = 0.25 * DIAGNOSTICS_PERIOD_S
+        # A piece that ends less than half a piece before the grid's time is due writes (else
+        # it waited a piece more: 1.5 s between two where a piece is half a period; at most a
+        # quarter period early, where pieces are shorter, as at 10 kHz).
+        piece_s = spacing_s * (len(samples) if samples is not None else 0)
+        early = min(0.5 * piece_s, 0.25 * DIAGNOSTICS_PERIOD_S)
         if now >= due - early or (samples is None and written is not None and now > written):
             # Due (once per period of bag time on a fixed grid), or the end.
             self._write_diagnostics(now)

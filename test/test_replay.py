@@ -113,6 +113,29 @@ def test_replay_estimates_scores_and_writes_what_the_node_publishes(
     assert hardware_ids == {SPECS["hardware_id"].default}
 
 
+def test_diagnostics_come_once_per_second_at_10_khz(tmp_path: Path) -> None:
+    """Pieces of 1000 samples are 0.1 s at 10 kHz: the diagnostics still come once per second
+    of the inputs' clock, and once more at the end. (A write up to a quarter period early
+    looked like the clock going back, so the next piece wrote again: pairs 0.1 s apart, and
+    the last one twice; found by a review session.)"""
+    bag, out = tmp_path / "fast", tmp_path / "out.mcap"
+    scene = {**SCENE, "duration_s": 4.0, "rate_hz": 10_000.0, "joint_states": False}
+    record(Simulator(scene_from_mapping(scene)), bag)
+    replay(bag, params(), out=out)
+    with out.open("rb") as stream:
+        reader = make_reader(stream, decoder_factories=[DecoderFactory()])
+        seconds = np.array(
+            [
+                decoded.header.stamp.sec + 1e-9 * decoded.header.stamp.nanosec
+                for _, channel, _, decoded in reader.iter_decoded_messages()
+                if channel.topic == DIAGNOSTICS_TOPIC
+            ]
+        )
+    spacing = np.diff(seconds)
+    assert np.all((spacing[:-1] > 0.9) & (spacing[:-1] < 1.1)), seconds
+    assert 0.0 < spacing[-1] < 1.1 and seconds[-1] == pytest.approx(4.0, abs=1e-3), seconds
+
+
 def test_the_summary_says_when_no_estimate_lies_on_the_truths_clock(
     bag: Path, tmp_path: Path, capsys: pytest.CaptureFixture[str]
 ) -> None:
