@@ -43,7 +43,7 @@ else:
 
 MAGIC = b"\x89MCAP0\r\n"
 OP_HEADER, OP_FOOTER, OP_SCHEMA, OP_CHANNEL, OP_MESSAGE, OP_CHUNK = 0x01, 0x02, 0x03, 0x04, 5, 6
-OP_DATA_END = 0x0F
+OP_CHUNK_INDEX, OP_DATA_END = 0x08, 0x0F
 RECORD_NAMES = {
     0x01: "Header",
     0x02: "Footer",
@@ -287,7 +287,13 @@ def _close_loose(found: _File, loose: list[tuple[int, int, int]]) -> None:
 
 
 def _read_summary(found: _File, data_end: int) -> None:
-    """Check the footer and read the channels of the summary section (if it has them)."""
+    """Check the footer and read the channels of the summary section (if it has them).
+
+    A chunk that the summary indexes but the data section does not hold as a Chunk record
+    (its record header corrupt: a reader skips a record of unknown opcode, and its messages
+    were silently lost) is damage: the segments that start at its first log time or later
+    are dropped.
+    """
     data, size = found.data, len(found.data)
     footer = size - FOOTER_SIZE
     if footer < data_end or data[size - len(MAGIC) :] != MAGIC or data[footer] != OP_FOOTER:
@@ -302,6 +308,7 @@ def _read_summary(found: _File, data_end: int) -> None:
     if not data_end <= summary_start <= footer:
         raise _DamageError(footer, f"footer points to a summary at byte {summary_start}")
     channels: dict[int, ChannelInfo] = {}
+    indexed: list[tuple[int, int]] = []  # (first log time, offset) of each indexed chunk
     pos = summary_start
     while pos < footer:
         op, length = _RECORD.unpack_from(data, pos)
@@ -310,8 +317,21 @@ def _read_summary(found: _File, data_end: int) -> None:
             raise _DamageError(pos, f"summary record at byte {pos} overruns the footer")
         if op in (OP_SCHEMA, OP_CHANNEL) and (channel := found.register(op, data, body, end)):
             channels[channel.id] = channel
+        elif op == OP_CHUNK_INDEX and length >= 24:
+            start_ns, _, offset = struct.unpack_from("<QQQ", data, body)
+            indexed.append((int(start_ns), int(offset)))
         pos = end
     found.summary_channels = channels
+    held = {s.offset for s in found.segments if s.chunk}
+    if missing := sorted((t, offset) for t, offset in indexed if offset not in held):
+        first_ns, offset = missing[0]
+        found.segments = [s for s in found.segments if s.sort_key[0] < first_ns]
+        raise _DamageError(
+            offset,
+            f"the summary indexes a Chunk record at byte {offset} that the data section does "
+            f"not hold ({len(missing)} such chunk(s); a corrupt record header?): the chunks "
+            f"that start at its first log time, {first_ns} ns, or later are not read",
+        )
 
 
 def _decompress(found: _File, segment: _Segment) -> bytes:

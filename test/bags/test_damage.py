@@ -159,6 +159,24 @@ def test_corrupt_chunk_size_and_record_length(tmp_path: Path) -> None:
         assert reason in str(error)
 
 
+def test_a_chunk_whose_opcode_is_corrupt_is_damage_not_a_gap(tmp_path: Path) -> None:
+    """One byte, the opcode of the second Chunk record: the MCAP spec has readers skip a
+    record of unknown opcode, so its messages were lost without a word (a gap, exit 0). The
+    summary's chunk index still names it: the damage is reported, the chunks before it are
+    delivered."""
+    motor = with_quantised_stamps(motor_samples(COUNT))
+    bag = write_bag(tmp_path / "bag", motor=motor)
+    data = bytearray(mcap_file(bag).read_bytes())
+    second = _chunk_offsets(bytes(data))[1]
+    data[second] = 0x99
+    mcap_file(bag).write_bytes(bytes(data))
+    partial, error = read_motor_samples(bag, partial_ok=True)
+    assert error is not None and f"damaged at byte {second}" in str(error)
+    assert f"indexes a Chunk record at byte {second} that the data section does not" in str(error)
+    assert 0 < len(partial) < len(motor)
+    assert_same(partial, motor[0 : len(partial)])
+
+
 def test_corrupt_payload_delivers_the_messages_before_it(tmp_path: Path) -> None:
     motor = motor_samples(300, faults=False)
     bag = tmp_path / "bag"
