@@ -124,6 +124,9 @@ class RawBatch:
 
     ``starts``/``sizes`` locate each CDR payload in ``buffer``. Messages with a log time below
     ``final_before_ns`` come before every message of later batches; ``None``: last batch.
+    ``place``: where the segment is in the bag (file index times 2**48 plus its byte offset),
+    which orders equal log times of different batches as they were written (batches come in
+    the order of their first log time, not of the files).
     """
 
     msgtype: str
@@ -132,6 +135,7 @@ class RawBatch:
     sizes: Int64Array
     log_time_ns: UInt64Array
     final_before_ns: int | None
+    place: int
 
 
 @dataclass(frozen=True)
@@ -432,7 +436,11 @@ class BagScanner:
                 return
             if batch is not None:
                 later = [t for t in starts[k + 1 :] if t != NO_MESSAGES]
-                yield RawBatch(*batch, final_before_ns=later[0] if later else None)
+                yield RawBatch(
+                    *batch,
+                    final_before_ns=later[0] if later else None,
+                    place=segment.file * 2**48 + segment.offset,
+                )
         for found in self._files:
             if found.damage is not None:
                 self._fail(found, found.damage)

@@ -106,6 +106,7 @@ def read_raw_messages(path: str | Path, topics: Collection[str] = ()) -> RawMess
         sizes: list[Int64Array] = []
         log_times: list[UInt64Array] = []
         topic_index: list[NDArray[np.int32]] = []
+        places: list[NDArray[np.int64]] = []
         size = 0
         for index, topic in enumerate(read):
             for batch in scanner.batches(topic):
@@ -115,14 +116,17 @@ def read_raw_messages(path: str | Path, topics: Collection[str] = ()) -> RawMess
                 sizes.append(batch.sizes)
                 log_times.append(batch.log_time_ns)
                 topic_index.append(np.full(len(batch.sizes), index, dtype=np.int32))
+                places.append(np.full(len(batch.sizes), batch.place, dtype=np.int64))
                 size += len(payload)
             damages.append(scanner.damage)
     log_time = np.concatenate([np.empty(0, np.uint64), *log_times])
-    order = np.argsort(log_time, kind="stable")
+    topic_of = np.concatenate([np.empty(0, np.int32), *topic_index])
+    place = np.concatenate([np.empty(0, np.int64), *places])
+    order = np.lexsort((place, topic_of, log_time))  # stable: a segment's ties keep their order
     return RawMessages(
         types=known,
         topics=read,
-        topic_index=np.concatenate([np.empty(0, np.int32), *topic_index])[order],
+        topic_index=topic_of[order],
         log_time_ns=log_time[order],
         starts=np.concatenate([np.empty(0, np.int64), *starts])[order],
         sizes=np.concatenate([np.empty(0, np.int64), *sizes])[order],

@@ -154,8 +154,9 @@ class _TopicReader:
                 return f"{name} has shape {values.shape[1:]}, earlier messages {first}"
         return None
 
-    def pieces(self) -> Iterator[tuple[NDArray[np.uint64], int | None, Columns]]:
-        """Per segment: log times, the final-before bound and the decoded columns."""
+    def pieces(self) -> Iterator[tuple[NDArray[np.uint64], int | None, int, Columns]]:
+        """Per segment: log times, the final-before bound, its place in the bag
+        (:class:`RawBatch`) and the decoded columns."""
         with closing(BagScanner(self.files.files)) as scanner:
             present = self.require(scanner)
             for batch in scanner.batches(self.topic):
@@ -169,10 +170,15 @@ class _TopicReader:
                     self.error = BagDamagedError(self.files.path, f"{self.topic}: {changed}")
                     return
                 if bad is None:
-                    yield batch.log_time_ns, batch.final_before_ns, columns
+                    yield batch.log_time_ns, batch.final_before_ns, batch.place, columns
                     continue
                 if bad.index:
-                    yield batch.log_time_ns[: bad.index], batch.final_before_ns, columns
+                    yield (
+                        batch.log_time_ns[: bad.index],
+                        batch.final_before_ns,
+                        batch.place,
+                        columns,
+                    )
                 self.error = BagDamagedError(
                     self.files.path,
                     f"{self.topic}: the message at log time {batch.log_time_ns[bad.index]} ns "
@@ -199,17 +205,21 @@ def _join(parts: list[Columns]) -> Columns:
 
 
 def _in_time_order(
-    pieces: Iterator[tuple[NDArray[np.uint64], int | None, Columns]],
+    pieces: Iterator[tuple[NDArray[np.uint64], int | None, int, Columns]],
 ) -> Iterator[Columns]:
-    """Merge per-segment pieces into log-time order, holding back what a later one may precede."""
+    """Merge per-segment pieces into log-time order, holding back what a later one may precede;
+    equal log times in the order written (the segments' places, then within a segment)."""
     held_times: NDArray[np.uint64] | None = None
+    held_places: NDArray[np.int64] = np.zeros(0, dtype=np.int64)
     held: Columns = {}
-    for times, final_before, columns in pieces:
+    for times, final_before, place, columns in pieces:
+        places = np.full(len(times), place, dtype=np.int64)
         if held_times is not None:
             times = np.concatenate([held_times, times])
+            places = np.concatenate([held_places, places])
             columns = _join([held, columns])
-            order = np.argsort(times, kind="stable")
-            times, columns = times[order], _take(columns, order)
+            order = np.lexsort((places, times))  # stable: a segment's ties keep their order
+            times, places, columns = times[order], places[order], _take(columns, order)
         cut = len(times)
         if final_before is not None:
             cut = int(np.searchsorted(times, np.uint64(final_before), side="left"))
@@ -217,7 +227,8 @@ def _in_time_order(
             yield _take(columns, slice(0, cut))
         held_times, held = None, {}
         if cut < len(times):
-            held_times, held = times[cut:], _take(columns, slice(cut, None))
+            held_times, held_places = times[cut:], places[cut:]
+            held = _take(columns, slice(cut, None))
     if held_times is not None:
         yield held
 
