@@ -96,8 +96,8 @@ class _DamageError(Exception):
 
 
 class _NotMcapError(_DamageError):
-    """Internal: the file does not start with the MCAP magic (reported as damage at byte 0,
-    and told apart by :meth:`BagScanner.not_mcap`)."""
+    """Internal: the file does not start with the MCAP magic (:class:`BagScanner` refuses it:
+    not a damaged bag but no MCAP at all)."""
 
 
 class _MismatchError(Exception):
@@ -367,6 +367,10 @@ class BagScanner:
     The files are memory-mapped until :meth:`close` (use ``contextlib.closing``). ``files``
     are scanned together (the files of a split bag). ``seen`` maps every topic met so far to
     its type.
+
+    Raises:
+        BagError: a file cannot be opened, or does not start with the MCAP magic (one cut
+            inside the magic, or empty, is a damaged MCAP file instead).
     """
 
     def __init__(self, files: Sequence[Path]) -> None:
@@ -376,6 +380,9 @@ class BagScanner:
         try:
             for path in files:
                 self._files.append(_open(path))
+            for found in self._files:
+                if isinstance(found.damage, _NotMcapError):
+                    raise BagError(found.path, found.damage.reason)
         except BaseException:
             self.close()
             raise
@@ -395,11 +402,6 @@ class BagScanner:
                 return None
             topics.update({c.topic: c.msgtype for c in found.summary_channels.values()})
         return topics
-
-    def not_mcap(self) -> list[Path]:
-        """The files that do not start with the MCAP magic (one cut inside the magic, or
-        empty, is a damaged MCAP file instead)."""
-        return [found.path for found in self._files if isinstance(found.damage, _NotMcapError)]
 
     def topics(self) -> dict[str, str]:
         """Topic -> message type of every channel in the segments before any damage.

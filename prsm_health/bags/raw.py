@@ -95,8 +95,6 @@ def read_raw_messages(path: str | Path, topics: Collection[str] = ()) -> RawMess
     """
     files = bag_files(path)
     with closing(BagScanner(files.files)) as scanner:
-        if not_mcap := scanner.not_mcap():
-            raise BagError(not_mcap[0], "not an MCAP file (no MCAP magic at the start)")
         met = scanner.topics()
         known = {**(files.topics or {}), **met}
         damages = [scanner.damage]
