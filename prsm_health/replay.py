@@ -86,8 +86,10 @@ class ReplayResult:
     states: every estimate. counters: the estimator's input counters. samples: samples read.
     truth: the bag's ground truth (None without /truth/state). metrics: scores against it.
     damage: the error that ended reading early (the rest of the result covers what was read
-    before it), or None. stopped: the replay was stopped before the end of the bag (the same).
-    elapsed_s: wall time of reading and estimating (without writing ``out`` or scoring).
+    before it), or None; inputs_complete: every input sample was read all the same (the
+    damage is in the truth only). stopped: the replay was stopped before the end of the bag
+    (the same). elapsed_s: wall time of reading and estimating (without writing ``out`` or
+    scoring).
     """
 
     states: list[HealthState]
@@ -98,6 +100,7 @@ class ReplayResult:
     damage: BagError | None
     stopped: bool
     elapsed_s: float
+    inputs_complete: bool = True
 
 
 def _chunks(bag: Path, topics: InputTopics, damage: list[BagError]) -> Iterator[MotorSamples]:
@@ -163,6 +166,7 @@ def replay(
         states += last
         if output is not None:
             output.add(None, last, estimator)
+        inputs_complete = not damage and not stopped
         truth = _truth(bag, damage)
         if output is not None and truth is not None and len(truth):
             write_truth(output.writer, truth)  # beside the estimates, for a viewer
@@ -184,6 +188,7 @@ def replay(
         damage=damage[0] if damage else None,
         stopped=stopped,
         elapsed_s=elapsed,
+        inputs_complete=inputs_complete,
     )
 
 

@@ -308,6 +308,8 @@ def _partial(result: ReplayResult) -> str:
     """What made the replay cover part of the bag only, for its outputs ("" if nothing)."""
     if result.stopped:
         return f"stopped by Ctrl-C after {result.samples} samples"
+    if result.damage is not None and result.inputs_complete:
+        return f"the truth up to its damage (all {result.samples} samples read)"
     if result.damage is not None:
         return f"up to the damage after {result.samples} samples"
     return ""

@@ -468,9 +468,14 @@ def test_a_truth_with_a_non_finite_value_is_scored_up_to_it(
     )
     assert result.truth is not None and len(result.truth) == 500
     assert result.metrics is not None and math.isfinite(result.metrics.load_rmse_n)
-    report = tmp_path / "report"
-    assert main(["replay", str(broken), "--scene", "sudden-jam", "--report", str(report)]) == 1
+    report, metrics = tmp_path / "report", tmp_path / "metrics.json"
+    argv = ["replay", str(broken), "--scene", "sudden-jam", "--report", str(report)]
+    assert main([*argv, "--metrics-json", str(metrics)]) == 1
     assert "DAMAGED" in capsys.readouterr().out and (report / "load.png").is_file()
+    # Every input sample was read: the outputs say the truth is what was cut (they said "up
+    # to the damage after 12000 samples"; found by a review session).
+    partial = f"the truth up to its damage (all {result.samples} samples read)"
+    assert result.inputs_complete and json.loads(metrics.read_text())["partial"] == partial
     # Cut before the first estimate: nothing to score, and still a damaged bag's report (the
     # scoring raised "no estimate within the truth's span": exit 2, no summary).
     load[1] = math.nan
