@@ -215,8 +215,11 @@ def load_scene(name_or_path: str) -> Scene:
     """A bundled scene by name, or a scene file by path."""
     bundled = name_or_path in scene_names()
     path = _bundled() / f"{name_or_path}.yaml" if bundled else Path(name_or_path)
-    if path.suffix not in (".yaml", ".yml") or not path.is_file():
+    if path.is_file() and path.suffix not in (".yaml", ".yml"):  # e.g. a bag given by mistake
+        raise ParameterError("scene", f"{name_or_path}: a scene file is YAML (.yaml or .yml)")
+    if not path.is_file():
         raise ParameterError(
-            "scene", f"unknown scene {name_or_path!r}; a file, or one of {', '.join(scene_names())}"
+            "scene",
+            f"unknown scene {name_or_path!r}; a YAML file, or one of {', '.join(scene_names())}",
         )
     return load_scene_file(path)

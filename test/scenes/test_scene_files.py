@@ -131,9 +131,14 @@ def test_a_valid_scene_file_loads_by_path(tmp_path: Path) -> None:
     assert scene.truth_decimation == 10
 
 
-def test_unknown_scene_names_are_refused() -> None:
+def test_unknown_scene_names_are_refused(tmp_path: Path) -> None:
     with pytest.raises(ParameterError, match="unknown scene 'nowhere'"):
         load_scene("nowhere")
+    # A file that is there but no YAML (a bag given as --scene) was an "unknown scene".
+    bag = tmp_path / "run.mcap"
+    bag.write_bytes(b"\x89MCAP0\r\n")
+    with pytest.raises(ParameterError, match=r"run.mcap: a scene file is YAML \(.yaml or .yml\)"):
+        load_scene(str(bag))
 
 
 def test_a_relative_preset_path_is_taken_from_the_scene_files_folder(
