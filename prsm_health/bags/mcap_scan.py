@@ -253,11 +253,16 @@ def _pass1(found: _File) -> None:
             raise _DamageError(pos, f"file cut at byte {size}, before {where} (truncated file?)")
         op, length = _RECORD.unpack_from(data, pos)
         body, end = pos + 9, pos + 9 + length
+        if op == 0x00:  # reserved by the spec: zeroed or overwritten data, not a record
+            raise _DamageError(pos, f"invalid record opcode 0x00 at byte {pos} (zeroed data?)")
         if end > size:
+            where = f"the {length}-byte body of the {_record_name(op)} record at byte {pos}"
+            if data[size - len(MAGIC) :] == MAGIC:  # the file ends whole: not cut short
+                raise _DamageError(
+                    pos, f"{where} would run past the file's end: a corrupt record header"
+                )
             raise _DamageError(
-                pos,
-                f"file cut at byte {size}, {size - body} bytes into the {length}-byte body of "
-                f"the {_record_name(op)} record at byte {pos} (truncated file?)",
+                pos, f"file cut at byte {size}, {size - body} bytes into {where} (truncated file?)"
             )
         if op == OP_MESSAGE:
             if length < 22:

@@ -177,6 +177,26 @@ def test_a_chunk_whose_opcode_is_corrupt_is_damage_not_a_gap(tmp_path: Path) -> 
     assert_same(partial, motor[0 : len(partial)])
 
 
+def test_zeroed_data_and_a_corrupt_length_are_named_where_they_are(tmp_path: Path) -> None:
+    """A zeroed run from the second chunk's start, and that chunk's length made huge in a
+    file of full length: the damage is named at that chunk and for what it is. (Both were
+    'file cut at byte ... (truncated file?)', the zeroed one 200 kB further on, where the
+    zeros ended; found by a review session.)"""
+    motor = with_quantised_stamps(motor_samples(COUNT))
+    bag = write_bag(tmp_path / "bag", motor=motor)
+    intact_bytes = mcap_file(bag).read_bytes()
+    second = _chunk_offsets(intact_bytes)[1]
+    zeroed, long = bytearray(intact_bytes), bytearray(intact_bytes)
+    zeroed[second : second + 200_000] = bytes(200_000)
+    struct.pack_into("<Q", long, second + 1, 2**40)
+    for data, reason in ((zeroed, "opcode 0x00"), (long, "a corrupt record header")):
+        mcap_file(bag).write_bytes(bytes(data))
+        partial, error = read_motor_samples(bag, partial_ok=True)
+        assert error is not None and f"damaged at byte {second}: " in str(error), str(error)
+        assert reason in str(error) and "truncated" not in str(error)
+        assert_same(partial, motor[0 : len(partial)])
+
+
 def test_corrupt_payload_delivers_the_messages_before_it(tmp_path: Path) -> None:
     motor = motor_samples(300, faults=False)
     bag = tmp_path / "bag"
