@@ -35,7 +35,6 @@ from types import TracebackType
 from typing import Any
 
 import numpy as np
-from numpy.typing import ArrayLike
 
 from prsm_health.bags import (
     DIAGNOSTIC_ARRAY,
@@ -50,13 +49,8 @@ from prsm_health.bags import (
     write_truth,
 )
 from prsm_health.bags.bagfiles import custom_data
-from prsm_health.bags.stamps import UInt64Array, log_times_from_stamps, seconds_to_stamps
-from prsm_health.bags.topics import (
-    DIAGNOSTICS_TOPIC,
-    HEALTH_TOPIC,
-    MOTOR_STATE_TOPIC,
-    TRUTH_TOPIC,
-)
+from prsm_health.bags.stamps import seconds_to_stamps
+from prsm_health.bags.topics import DIAGNOSTICS_TOPIC, HEALTH_TOPIC, TRUTH_TOPIC
 from prsm_health.bags.typestore import typestore
 from prsm_health.estimation.estimate import HealthState
 from prsm_health.estimation.estimator import HealthEstimator
@@ -246,7 +240,6 @@ class _Output:
         self._diagnostics_written_s: float | None = None
         self._received_until_s: float | None = None
         self._unplaced = 0
-        self._log_ns: Counter[str] = Counter()  # per topic, the latest log time written
         types = typestore().types
         self._health_type = types[HEALTH_ESTIMATE]
         self._header = types["std_msgs/msg/Header"]
@@ -290,14 +283,13 @@ class _Output:
         the time it receives them; they describe the latest estimate. A piece's messages are
         received spread over the time its samples advanced that clock."""
         if samples is not None and len(samples):
-            log_times = self._log_times(MOTOR_STATE_TOPIC, log_times_from_stamps(samples.stamp_s))
-            write_motor_states(self.writer, samples, receive_time_ns=log_times)
+            write_motor_states(self.writer, samples)
         replaced: Counter[str] = Counter()
         for state in states:
             fields = health_estimate_fields(state, replaced=replaced)
             header = self._header(stamp=self._stamp(state.stamp_s), frame_id=self._hardware_id)
             message = self._health_type(header=header, **_typed(fields))
-            log_time = self._log_times(HEALTH_TOPIC, _log_time_ns(state.stamp_s))
+            log_time = self.writer.log_times_after(HEALTH_TOPIC, _log_time_ns(state.stamp_s))
             self.writer.write(HEALTH_TOPIC, int(log_time[0]), message)
         if states:
             self._latest = states[-1]
@@ -332,17 +324,6 @@ class _Output:
             )
         self._diagnostics_due_s = due
 
-    def _log_times(self, topic: str, times_ns: ArrayLike) -> UInt64Array:
-        """``times_ns`` made non-decreasing over the whole output bag on ``topic``, as a
-        recorder's receive times are: readers return a topic in log-time order, and a piece
-        after the clock went back was interleaved with the pieces before (replaying the output
-        then fed another stream)."""
-        times = np.maximum.accumulate(
-            np.maximum(np.atleast_1d(np.asarray(times_ns, dtype=np.uint64)), self._log_ns[topic])
-        )
-        self._log_ns[topic] = int(times[-1])
-        return times
-
     def _receive(self, now_s: float, count: int, spacing_s: float) -> None:
         """The input tracker receives ``count`` messages spread evenly over the time the inputs'
         clock advanced since it last received (at most their number at the usual spacing
@@ -368,7 +349,7 @@ class _Output:
             header=self._header(stamp=self._stamp(now_s), frame_id=""),
             status=[self._status_message(s) for s in statuses],
         )
-        log_time = self._log_times(DIAGNOSTICS_TOPIC, _log_time_ns(now_s))
+        log_time = self.writer.log_times_after(DIAGNOSTICS_TOPIC, _log_time_ns(now_s))
         self.writer.write(DIAGNOSTICS_TOPIC, int(log_time[0]), message)
 
     def _status_message(self, status: DiagnosticStatusData) -> Any:

@@ -67,6 +67,7 @@ NO_MESSAGES = -1
 _RECORD = struct.Struct("<BQ")
 _MESSAGE = struct.Struct("<HIQ")
 _CHUNK_TIMES = struct.Struct("<QQQI")
+_CHUNK_INDEX_START = struct.Struct("<QQQ")  # first and last log time, the chunk's offset
 _U16 = struct.Struct("<H")
 _U32 = struct.Struct("<I")
 _U64 = struct.Struct("<Q")
@@ -326,8 +327,8 @@ def _read_summary(found: _File, data_end: int) -> None:
             raise _DamageError(pos, f"summary record at byte {pos} overruns the footer")
         if op in (OP_SCHEMA, OP_CHANNEL) and (channel := found.register(op, data, body, end)):
             channels[channel.id] = channel
-        elif op == OP_CHUNK_INDEX and length >= 24:
-            start_ns, _, offset = struct.unpack_from("<QQQ", data, body)
+        elif op == OP_CHUNK_INDEX and length >= _CHUNK_INDEX_START.size:
+            start_ns, _, offset = _CHUNK_INDEX_START.unpack_from(data, body)
             indexed.append((int(start_ns), int(offset)))
         pos = end
     found.summary_channels = channels

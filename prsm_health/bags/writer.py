@@ -123,6 +123,7 @@ class BagWriter:
         if compress:
             self._writer.set_compression(CompressionMode.STORAGE, CompressionFormat.ZSTD)
         self._connections: dict[str, Connection] = {}
+        self._latest_log_ns: dict[str, int] = {}  # per topic, the latest log time written
         self._open = False
 
     def __enter__(self) -> BagWriter:
@@ -261,6 +262,17 @@ class BagWriter:
         write = self._writer.write
         for timestamp, data in zip(times.tolist(), payloads, strict=True):
             write(connection, timestamp, data)
+        if len(times):
+            self._latest_log_ns[topic] = max(self._latest_log_ns.get(topic, 0), int(times.max()))
+
+    def log_times_after(self, topic: str, times_ns: ArrayLike) -> UInt64Array:
+        """``times_ns`` (non-decreasing), none before the latest log time written on ``topic``
+        so far: log times that never go back over the bag, as a recorder's receive times, for
+        a topic written in pieces (each piece's stamps made non-decreasing on their own put a
+        piece after a clock jump back among the pieces before, in any reader's log-time
+        order)."""
+        times = np.atleast_1d(np.asarray(times_ns, dtype=np.uint64))
+        return np.maximum(times, np.uint64(self._latest_log_ns.get(topic, 0)))
 
 
 def _stamp_columns(writer: BagWriter, topic: str, stamp_s: NDArray[np.float64]) -> dict[str, Any]:
@@ -283,7 +295,7 @@ def _log_times(
     writer: BagWriter, topic: str, stamp_s: NDArray[np.float64], receive_time_ns: ArrayLike | None
 ) -> UInt64Array | NDArray[Any]:
     if receive_time_ns is None:
-        return log_times_from_stamps(stamp_s)
+        return writer.log_times_after(topic, log_times_from_stamps(stamp_s))
     times = np.asarray(receive_time_ns)
     if times.shape != stamp_s.shape:
         raise BagError(

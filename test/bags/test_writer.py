@@ -18,7 +18,14 @@ from prsm_health.bags.reader import InputTopics, read_motor_samples
 from prsm_health.bags.stamps import log_times_from_stamps, seconds_to_stamps
 from prsm_health.bags.typestore import GROUND_TRUTH, JOINT_STATE, MOTOR_STATE, typestore
 from prsm_health.bags.writer import LIBRARY, BagWriter, write_motor_states
-from test.bags.samples import mcap_file, motor_samples, truth_samples, write_bag
+from test.bags.samples import (
+    assert_same,
+    mcap_file,
+    motor_samples,
+    truth_samples,
+    with_quantised_stamps,
+    write_bag,
+)
 
 
 def _rows(t: np.ndarray, *columns: Any) -> list[tuple[Any, ...]]:
@@ -255,6 +262,20 @@ def test_a_bare_mcap_file_never_replaces_or_takes_what_another_wrote(tmp_path: P
 
     with pytest.raises(BagError, match=r"cannot create the bag: .*File name too long"):
         BagWriter(tmp_path / f"{'a' * 245}.mcap")
+
+
+def test_stamps_written_in_pieces_keep_their_order_after_a_clock_jump(tmp_path: Path) -> None:
+    """Log times from the stamps never go back over the topic, across calls too: a second
+    piece whose stamps jumped back by 1 s reads back after the first. (Each call made its
+    own stamps non-decreasing; the replay's output, written in pieces, interleaved the
+    pieces after a jump back, fixed there until 2026-11-27; recorded /joint_states too.)"""
+    motor = motor_samples(2000, faults=False)
+    motor.stamp_s[1000:] -= 1.0
+    bag = tmp_path / "pieces"
+    with BagWriter(bag) as writer:
+        write_motor_states(writer, motor[:1000])
+        write_motor_states(writer, motor[1000:])
+    assert_same(read_motor_samples(bag, InputTopics()), with_quantised_stamps(motor))
 
 
 def test_writer_errors_name_the_bag(tmp_path: Path) -> None:
