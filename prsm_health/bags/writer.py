@@ -356,7 +356,8 @@ def write_joint_states(
     """
     columns = _sample_columns(writer, topic, samples, ("effort", "velocity", "position"))
     payloads = encode_joint_states(columns, joint=joint_name)
-    _write_series(writer, topic, JOINT_STATE, log_times_from_stamps(samples.stamp_s), payloads)
+    log_times = _log_times(writer, topic, samples.stamp_s, None)
+    _write_series(writer, topic, JOINT_STATE, log_times, payloads)
 
 
 def _truth_columns(writer: BagWriter, topic: str, truth: TruthSamples) -> Mapping[str, Any]:
@@ -392,4 +393,5 @@ def write_truth(writer: BagWriter, truth: TruthSamples, *, topic: str = TRUTH_TO
         BagError: roller_jammed not 2-D, loading_case or roller count beyond a uint8, stamps.
     """
     payloads = encode_truth(_truth_columns(writer, topic, truth))
-    _write_series(writer, topic, GROUND_TRUTH, log_times_from_stamps(truth.stamp_s), payloads)
+    log_times = _log_times(writer, topic, truth.stamp_s, None)
+    _write_series(writer, topic, GROUND_TRUTH, log_times, payloads)

@@ -17,7 +17,13 @@ from prsm_health.bags.errors import BagError
 from prsm_health.bags.reader import InputTopics, read_motor_samples
 from prsm_health.bags.stamps import log_times_from_stamps, seconds_to_stamps
 from prsm_health.bags.typestore import GROUND_TRUTH, JOINT_STATE, MOTOR_STATE, typestore
-from prsm_health.bags.writer import LIBRARY, BagWriter, write_motor_states
+from prsm_health.bags.writer import (
+    LIBRARY,
+    BagWriter,
+    write_joint_states,
+    write_motor_states,
+    write_truth,
+)
 from test.bags.samples import (
     assert_same,
     mcap_file,
@@ -264,18 +270,32 @@ def test_a_bare_mcap_file_never_replaces_or_takes_what_another_wrote(tmp_path: P
         BagWriter(tmp_path / f"{'a' * 245}.mcap")
 
 
-def test_stamps_written_in_pieces_keep_their_order_after_a_clock_jump(tmp_path: Path) -> None:
-    """Log times from the stamps never go back over the topic, across calls too: a second
-    piece whose stamps jumped back by 1 s reads back after the first. (Each call made its
-    own stamps non-decreasing; the replay's output, written in pieces, interleaved the
-    pieces after a jump back, fixed there until 2026-11-27; recorded /joint_states too.)"""
-    motor = motor_samples(2000, faults=False)
-    motor.stamp_s[1000:] -= 1.0
+@pytest.mark.parametrize("kind", ["motor", "joint", "truth"])
+def test_stamps_written_in_pieces_keep_their_order_after_a_clock_jump(
+    tmp_path: Path, kind: str
+) -> None:
+    """Log times from the stamps never go back over the topic, across calls too, whichever
+    series is written: a second piece whose stamps jumped back by 1 s has the first piece's
+    last log time, so every reader returns the messages in the order written. (Each call made
+    its own stamps non-decreasing; the replay's output, written in pieces, interleaved the
+    pieces after a jump back until 2026-11-27, and /joint_states and /truth/state did until
+    a review found them left out of the fix.)"""
+    series = truth_samples(2000) if kind == "truth" else motor_samples(2000, faults=False)
+    series.stamp_s[1000:] -= 1.0
+    write = {"motor": write_motor_states, "joint": write_joint_states, "truth": write_truth}[kind]
     bag = tmp_path / "pieces"
     with BagWriter(bag) as writer:
-        write_motor_states(writer, motor[:1000])
-        write_motor_states(writer, motor[1000:])
-    assert_same(read_motor_samples(bag, InputTopics()), with_quantised_stamps(motor))
+        write(writer, series[:1000])
+        write(writer, series[1000:])
+    with mcap_file(bag).open("rb") as stream:
+        messages = make_reader(stream).iter_messages(log_time_order=False)
+        log_times = [message.log_time for _, _, message in messages]
+    assert len(log_times) == 2000
+    expected = log_times_from_stamps(series.stamp_s)
+    expected[1000:] = expected[999]
+    np.testing.assert_array_equal(log_times, expected)
+    if kind == "motor":
+        assert_same(read_motor_samples(bag, InputTopics()), with_quantised_stamps(series))
 
 
 def test_writer_errors_name_the_bag(tmp_path: Path) -> None:
