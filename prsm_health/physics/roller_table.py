@@ -62,7 +62,13 @@ from prsm_health.physics.friction import (
     VISCOUS_SPEED_EXPONENT,
     friction_torque,
 )
-from prsm_health.physics.geometry import Geometry, Misalignment, require
+from prsm_health.physics.geometry import (
+    Geometry,
+    Misalignment,
+    require,
+    require_integer,
+    require_ranges,
+)
 from prsm_health.physics.load_distribution import (
     LoadingCase,
     radial_capacity_ratio,
@@ -230,13 +236,20 @@ class TableGrid:
     angles_per_sector: int = 8
 
     def __post_init__(self) -> None:
-        for name in ("load_min_fraction", "load_max_factor", "ratio_max_fraction"):
-            value = getattr(self, name)
-            require(math.isfinite(value) and value > 0.0, f"grid.{name}", "must be > 0")
-        require(self.load_min_fraction < self.load_max_factor, "grid.load_max_factor", "<= min")
-        require(self.ratio_max_fraction < 1.0, "grid.ratio_max_fraction", "must be < 1")
+        positive = ("load_min_fraction", "load_max_factor", "ratio_max_fraction")
+        require_ranges(self, "grid", dict.fromkeys(positive))
+        require(
+            self.ratio_max_fraction < 1.0,
+            "grid.ratio_max_fraction",
+            f"must be < 1, got {self.ratio_max_fraction:g}",
+        )
+        require(
+            self.load_min_fraction < self.load_max_factor,
+            "grid.load_max_factor",
+            f"must be > load_min_fraction {self.load_min_fraction:g}, got {self.load_max_factor:g}",
+        )
         for name in ("loads", "misaligned_loads", "ratios", "angles_per_sector"):
-            require(getattr(self, name) >= 2, f"grid.{name}", "must be >= 2")
+            require_integer(getattr(self, name), f"grid.{name}", 2)
 
     def max_radial_ratio(self, geometry: Geometry) -> float:
         """Largest F_r / F_a of the rho axis: ratio_max_fraction of the radial capacity."""

@@ -12,7 +12,7 @@ from typing import Any, TypeVar
 
 from prsm_health.config import build_dataclass
 from prsm_health.physics.errors import ParameterError
-from prsm_health.physics.geometry import require_real
+from prsm_health.physics.geometry import require_integer, require_real
 
 T = TypeVar("T")
 
@@ -51,14 +51,9 @@ def number(
     return value
 
 
-def integer(obj: object, name: str, *, low: int | None = None, high: int | None = None) -> int:
-    """Check field ``name`` of ``obj`` is an integer in [low, high] (a bool is refused)."""
-    value = getattr(obj, name)
-    if isinstance(value, bool) or not isinstance(value, int):
-        raise ParameterError(name, f"must be an integer, got {value!r}")
-    if (low is not None and value < low) or (high is not None and value > high):
-        raise ParameterError(name, f"must be in [{low}, {high}], got {value!r}")
-    return value
+def integer(obj: object, name: str, *, low: int, high: int | None = None) -> int:
+    """Check field ``name`` of ``obj`` with :func:`require_integer` (an int in [low, high])."""
+    return require_integer(getattr(obj, name), name, low, high)
 
 
 def flag(obj: object, name: str) -> bool:

@@ -180,5 +180,11 @@ def test_lookup_refuses_inputs_outside_the_table() -> None:
 def test_grid_is_validated_by_field() -> None:
     with pytest.raises(ParameterError, match=r"grid\.ratio_max_fraction"):
         TableGrid(ratio_max_fraction=1.2)
-    with pytest.raises(ParameterError, match=r"grid\.loads"):
+    with pytest.raises(ParameterError, match=r"grid\.loads: must be an integer >= 2, got 1"):
         TableGrid(loads=1)
+    with pytest.raises(ParameterError, match=r"grid\.ratios: must be an integer >= 2, got 2.5"):
+        TableGrid(ratios=2.5)  # type: ignore[arg-type]
+    with pytest.raises(ParameterError, match=r"grid\.load_min_fraction: must be a finite number"):
+        TableGrid(load_min_fraction=math.nan)
+    with pytest.raises(ParameterError, match=r"grid\.load_max_factor: must be > load_min_fraction"):
+        TableGrid(load_min_fraction=0.5, load_max_factor=0.1)

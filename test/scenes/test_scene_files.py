@@ -97,7 +97,10 @@ def with_changes(**changes: object) -> dict[str, object]:
         ),
         (with_changes(jams=[{"time_s": -1.0, "roller": 2}]), "jams[0].time_s"),
         (with_changes(wear={"coefficient_factor": 2.0, "prior_sigma_ln": 0.5}), "wear.prior"),
-        (with_changes(sensors={"encoder_counts_per_rev": -4}), "sensors.encoder_counts_per_rev"),
+        (
+            with_changes(sensors={"encoder_counts_per_rev": -4}),
+            "sensors.encoder_counts_per_rev: must be an integer >= 0, got -4",
+        ),
         (
             with_changes(
                 sensor_faults={"spikes": [{"time_s": 1.0, "field": "torque", "value": 1}]}
