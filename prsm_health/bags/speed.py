@@ -104,6 +104,9 @@ def main(argv: Sequence[str] | None = None) -> int:
     parser.add_argument("--samples", type=int, default=60_000)
     parser.add_argument("--repeats", type=int, default=5)
     args = parser.parse_args(argv)
+    for option, value in (("--samples", args.samples), ("--repeats", args.repeats)):
+        if value < 1:
+            parser.error(f"{option} must be at least 1, got {value}")
     with tempfile.TemporaryDirectory() as folder:
         speeds = measure(args.samples, args.repeats, Path(folder))
     print("\n".join(speeds.lines()))
