@@ -50,6 +50,7 @@ def decode_baseline(path: str | Path, topic: str = MOTOR_STATE_TOPIC) -> Baselin
     return Baseline(time.perf_counter() - start, count)
 
 
-def decode_time_baseline(path: str | Path, topic: str = MOTOR_STATE_TOPIC) -> float:
-    """Seconds of :func:`decode_baseline` (the replay's speed floor)."""
-    return decode_baseline(path, topic).seconds
+def decode_time_baseline(path: str | Path) -> float:
+    """Seconds of :func:`decode_baseline` of the bag's MotorState topic (the replay's speed
+    floor)."""
+    return decode_baseline(path, MOTOR_STATE_TOPIC).seconds

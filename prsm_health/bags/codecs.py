@@ -300,10 +300,11 @@ def encode_joint_states(values: Mapping[str, NDArray[Any]], *, joint: str) -> li
     )
 
 
-def encode_truth(values: Mapping[str, NDArray[Any]], *, frame_id: str = "") -> list[memoryview]:
-    """GroundTruth payloads from columns named as :func:`decode_truth` returns them."""
+def encode_truth(values: Mapping[str, NDArray[Any]]) -> list[memoryview]:
+    """GroundTruth payloads from columns named as :func:`decode_truth` returns them (an
+    empty header.frame_id)."""
     rollers = values["roller_jammed"].shape[1]
     message = typestore().types[GROUND_TRUTH](
-        _header(frame_id), 0.0, 0.0, 0, 0, np.zeros(rollers, dtype=np.bool_), *([0.0] * 6)
+        _header(""), 0.0, 0.0, 0, 0, np.zeros(rollers, dtype=np.bool_), *([0.0] * 6)
     )
     return _encode(message, GROUND_TRUTH, truth_layout, values, len(values["sec"]))

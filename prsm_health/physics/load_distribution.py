@@ -72,6 +72,10 @@ OPEN_CONTACT_STIFFNESS_RATIO = 1e-8
 #: Relative round-off of a residual that sums a few dozen terms (64 machine epsilons).
 ROUNDOFF = 64.0 * float(np.finfo(float).eps)
 
+#: The Newton solve's limit on its scaled residual, and on its iterations.
+RESIDUAL_TOLERANCE = 1e-11
+MAX_ITERATIONS = 60
+
 
 class LoadingCase(enum.IntEnum):
     """The two load paths of the downhole robot (paper 000, section 4.2)."""
@@ -215,8 +219,6 @@ def solve_load_distribution(
     clearance_roller_nut_m: ArrayLike | None = None,
     case: LoadingCase = LoadingCase.SCREW_TENSION_NUT_COMPRESSION,
     elastic_errors: bool = False,
-    tolerance: float = 1e-11,
-    max_iterations: int = 60,
 ) -> LoadDistribution:
     """Normal contact forces on every thread of every roller (see the module docstring).
 
@@ -266,8 +268,6 @@ def solve_load_distribution(
             carrier.reshape(-1)[loaded],
             chain=_chain_matrices(geometry, case, elastic_errors),
             symmetric=symmetric,
-            tolerance=tolerance,
-            max_iterations=max_iterations,
         )
         try:
             solved = solve(g_sr, g_rn)
@@ -343,8 +343,6 @@ def _newton(
     *,
     chain: _ChainMatrices,
     symmetric: bool,
-    tolerance: float,
-    max_iterations: int,
     start: _State | None = None,
 ) -> _Solved:
     """Damped Newton on the whole system from ``start`` (or a uniform-load guess): contact
@@ -411,7 +409,7 @@ def _newton(
     # Compatibility residuals sum clearances that can be 1e4 times the approaches at tiny
     # loads; their round-off floor joins the scale, so the tolerance stays reachable.
     clearance_span = c * max(float(np.ptp(g_sr)), float(np.ptp(g_rn)))
-    kin_scale = delta_ref + ROUNDOFF * (clearance_span + delta_ref) / tolerance
+    kin_scale = delta_ref + ROUNDOFF * (clearance_span + delta_ref) / RESIDUAL_TOLERANCE
 
     def norm(parts: tuple[FloatArray, FloatArray, FloatArray, FloatArray]) -> FloatArray:
         """Largest scaled residual of each batch member (the convergence test)."""
@@ -462,11 +460,11 @@ def _newton(
     error = norm(parts)
     current = merit(parts)
     iterations = 0
-    while np.any(error > tolerance):
-        if iterations == max_iterations:
+    while np.any(error > RESIDUAL_TOLERANCE):
+        if iterations == MAX_ITERATIONS:
             raise ConvergenceError(
-                f"load distribution did not converge in {max_iterations} iterations: "
-                f"scaled residual {float(error.max()):.3g} > {tolerance:g}"
+                f"load distribution did not converge in {MAX_ITERATIONS} iterations: "
+                f"scaled residual {float(error.max()):.3g} > {RESIDUAL_TOLERANCE:g}"
             )
         iterations += 1
         r_s, r_n, r_eq, r_glob = parts
@@ -511,7 +509,7 @@ def _newton(
             trial_parts = residuals(*trial)
             trial_merit = merit(trial_parts)
             worse = trial_merit > (1.0 - 1e-4 * alpha) * current
-            if not np.any(worse & (error > tolerance)):
+            if not np.any(worse & (error > RESIDUAL_TOLERANCE)):
                 break
             alpha = np.where(worse, alpha * 0.5, alpha)
         d_s, d_n, a, glob = trial

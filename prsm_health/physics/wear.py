@@ -50,18 +50,17 @@ from prsm_health.physics.parameters import WearParameters
 FloatArray = NDArray[np.float64]
 
 
-def validate_contact_loads(
-    geometry: Geometry, contact_forces_n: ArrayLike, name: str = "screw_roller_n"
-) -> FloatArray:
-    """Contact forces as a float array of shape (..., n_rollers, n_threads), finite and >= 0."""
-    forces = np.asarray(contact_forces_n, dtype=np.float64)
+def validate_contact_loads(geometry: Geometry, screw_roller_n: ArrayLike) -> FloatArray:
+    """Screw-roller contact forces as a float array of shape (..., n_rollers, n_threads),
+    finite and >= 0 (refused by the name ``screw_roller_n``)."""
+    forces = np.asarray(screw_roller_n, dtype=np.float64)
     shape = (geometry.n_rollers, geometry.n_threads)
     if forces.shape[-2:] != shape:
         raise ParameterError(
-            name, f"must have shape (..., {shape[0]}, {shape[1]}), got {forces.shape}"
+            "screw_roller_n", f"must have shape (..., {shape[0]}, {shape[1]}), got {forces.shape}"
         )
     if not (np.isfinite(forces).all() and (forces >= 0.0).all()):
-        raise ParameterError(name, "contact forces must be finite and >= 0")
+        raise ParameterError("screw_roller_n", "contact forces must be finite and >= 0")
     return forces
 
 

@@ -267,10 +267,10 @@ class Monitor:
         if before is not None:
             self._show(before)
 
-    def spin_once(self, timeout_s: float = 0.05) -> None:
-        """Handle what has arrived, waiting at most ``timeout_s`` for something."""
+    def spin_once(self) -> None:
+        """Handle what has arrived, waiting at most 50 ms for something."""
         self._ask_hardware_id()
-        self._executor.spin_once(timeout_sec=timeout_s)
+        self._executor.spin_once(timeout_sec=0.05)
 
     def done(self) -> bool:
         """The requested number of records has been printed."""
