@@ -29,7 +29,7 @@ from prsm_health.benchmark import (
     run_benchmark,
     select,
 )
-from prsm_health.benchmark_report import write_results
+from prsm_health.benchmark_report import FILES, write_results
 from prsm_health.physics.errors import ParameterError
 
 
@@ -96,7 +96,7 @@ def run_bench(args: argparse.Namespace) -> int:
         )
     results = run_benchmark(plan)
     floors = write_results(results, args.out)
-    print(f"{args.out}: results.json, results.md, pareto.png ({results.elapsed_s / 60:.1f} min)")
+    print(f"{args.out}: {', '.join(FILES)} ({results.elapsed_s / 60:.1f} min)")
     for floor in floors:
         verdict = {True: "pass", False: "FAIL", None: "-"}[floor.passed]
         print(f"  {verdict:4s}  {floor.name}: {floor.measured}")

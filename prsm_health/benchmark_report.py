@@ -40,7 +40,8 @@ WEAR_ERROR_PERCENT = 10.0
 WEAR_COVERAGE = 0.9
 #: Scenes that are not the downhole cycle (outside the load-RMSE floor).
 NOT_DOWNHOLE = ("stationary-hold",)
-FILES = ("results.json", "results.md", "pareto.png")
+#: What :func:`write_results` writes: every run's numbers, the tables, the time-error plot.
+JSON_FILE, MARKDOWN_FILE, PARETO_FILE = FILES = ("results.json", "results.md", "pareto.png")
 
 
 @dataclass(frozen=True)
@@ -844,7 +845,7 @@ def write_results(results: BenchResults, out: Path) -> list[Floor]:
     """Write FILES into ``out`` (created if needed); returns the floors."""
     out.mkdir(parents=True, exist_ok=True)
     found = floors(results)
-    (out / "results.json").write_text(json.dumps(results_json(results, found), indent=2) + "\n")
-    (out / "results.md").write_text(markdown(results, found))
-    pareto(results, out / "pareto.png")
+    (out / JSON_FILE).write_text(json.dumps(results_json(results, found), indent=2) + "\n")
+    (out / MARKDOWN_FILE).write_text(markdown(results, found))
+    pareto(results, out / PARETO_FILE)
     return found
