@@ -625,7 +625,7 @@ def _told(results: BenchResults) -> list[str]:
     rows = []
     for told in results.told_count:
         run = default[told.scene]
-        low, high = told.metrics.load_nees_interval
+        interval = told.metrics.load_nees_interval
         rows.append(
             [
                 told.scene,
@@ -633,7 +633,7 @@ def _told(results: BenchResults) -> list[str]:
                 f"{told.rmse_percent_largest:.2f}",
                 f"{run.metrics.load_nees_mean:.2f}",
                 f"{told.metrics.load_nees_mean:.2f}",
-                f"{low:.2f}-{high:.2f}",
+                "-" if interval is None else f"{interval[0]:.2f}-{interval[1]:.2f}",
                 str(told.metrics.false_jam_declarations),
             ]
         )

@@ -16,7 +16,6 @@ import dataclasses
 import itertools
 import json
 import math
-import os
 import sys
 from pathlib import Path
 from typing import Any
@@ -41,6 +40,7 @@ from prsm_health.interrupt import (
     removed_on_abort,
     stop_on_interrupt,
 )
+from prsm_health.output_paths import make_folder, remove_made_folders
 from prsm_health.outputs import DEFAULT_HARDWARE_ID, hardware_id_problem
 from prsm_health.replay import ReplayResult, replay
 from prsm_health.scenes.recording import (
@@ -147,10 +147,10 @@ def _scene_of(args: argparse.Namespace, params_path: Path) -> SceneActuator | No
     return scene_actuator(args.scene) if args.scene else usable_bag_actuator(args.bag, params_path)
 
 
-def _check_outputs(args: argparse.Namespace) -> None:
+def _check_outputs(args: argparse.Namespace) -> list[Path]:
     """Refuse, before the replay, outputs that could not be written afterwards, and make the
     folders they go into (so that a folder that cannot be made fails now, not after the
-    replay)."""
+    replay); returns the folders made (:func:`~prsm_health.output_paths.make_folder`)."""
     outputs = {
         option: path.resolve()
         for option, path in (
@@ -173,18 +173,23 @@ def _check_outputs(args: argparse.Namespace) -> None:
         raise ValueError(f"--report: {args.report} exists and is not a directory")
     if args.metrics_json is not None and args.metrics_json.is_dir():
         raise ValueError(f"--metrics-json: {args.metrics_json} is a directory")
-    for option, folder in (
-        ("--report", args.report),
-        ("--metrics-json", None if args.metrics_json is None else args.metrics_json.parent),
-    ):
-        if folder is None:
-            continue
-        try:
-            folder.mkdir(parents=True, exist_ok=True)
-        except OSError as exc:
-            raise ValueError(f"{option}: cannot make the folder {folder}: {exc}") from exc
-        if not os.access(folder, os.W_OK | os.X_OK):
-            raise ValueError(f"{option}: the folder {folder} is not writable")
+    made: list[Path] = []
+    try:
+        for option, folder in (
+            ("--out", None if args.out is None else args.out.parent),
+            ("--report", args.report),
+            ("--metrics-json", None if args.metrics_json is None else args.metrics_json.parent),
+        ):
+            if folder is not None:
+                made += make_folder(folder, option)
+    except ValueError:
+        remove_made_folders(made)
+        raise
+    return made
+
+
+def _check_options(args: argparse.Namespace) -> None:
+    """Refuse options that do not apply."""
     for option, given in (("--joint-name", args.joint_name), ("--effort", args.effort)):
         if given is not None and args.joint_states is None:
             raise ValueError(f"{option}: applies only with --joint-states TOPIC")
@@ -198,8 +203,20 @@ def run_replay(args: argparse.Namespace) -> int:
         ValueError: an output that cannot be written, or no sample of the bag accepted (the
             summary is printed before the error).
     """
+    _check_options(args)
     params, source, scene = _params(args)
-    _check_outputs(args)
+    bag_files(args.bag)  # a missing or malformed bag fails here, before any output
+    made = _check_outputs(args)
+    try:
+        return _replay_into_outputs(args, params, source, scene)
+    finally:  # those still empty: a run that failed, or wrote nothing there, leaves none
+        remove_made_folders(made)
+
+
+def _replay_into_outputs(
+    args: argparse.Namespace, params: EstimatorParams, source: str, scene: SceneActuator | None
+) -> int:
+    """:func:`run_replay` once the options are checked and the output folders made."""
     topics = InputTopics(
         motor_state=args.motor_state_topic,
         joint_states=args.joint_states,
@@ -211,7 +228,6 @@ def run_replay(args: argparse.Namespace) -> int:
             else None
         ),
     )
-    bag_files(args.bag)  # a missing or malformed bag fails here, before any output
     with (
         tqdm(unit="sample", unit_scale=True, disable=None, file=sys.stderr) as bar,
         stop_on_interrupt() as stop,
@@ -226,18 +242,16 @@ def run_replay(args: argparse.Namespace) -> int:
             hardware_id=args.hardware_id,
             stop=stop,
         )
-    written = [f"bag {args.out}"] if args.out is not None else []
     if not result.counters.accepted:
         print(summary(args.bag, source, result))
         why = f"no sample of {args.bag} accepted: {_rejected_why(args.bag, topics, result)}"
-        if result.damage is not None:  # the damage says more than what it left
-            print(f"  {why}")
-            if written:
-                print(f"  wrote {', '.join(written)}")
-            return 1
         if args.out is not None and remove_output(args.out):  # else it blocks the rerun
             why += f" (the output bag {args.out} is not kept)"
+        if result.damage is not None:  # the damage says more than what it left
+            print(f"  {why}")
+            return 1
         raise ValueError(why)
+    written = [f"bag {args.out}"] if args.out is not None else []
     # The outputs first, the summary after them: a reader that leaves early (``| head``)
     # must not cost the files.
     notes = []
@@ -343,7 +357,8 @@ def summary(bag: Path, source: str, result: ReplayResult) -> str:
         f"(time resets {counters.time_resets}, gaps {counters.gaps})",
     ]
     if result.damage is not None:
-        lines.append(f"  DAMAGED: {result.damage} (estimates cover what was read before it)")
+        covered = "estimates cover" if result.states else "no estimate from"
+        lines.append(f"  DAMAGED: {result.damage} ({covered} what was read before it)")
     if result.stopped:
         lines.append("  STOPPED by Ctrl-C: the estimates and scores cover what was read")
     if result.states:

@@ -404,14 +404,21 @@ def test_cli_says_when_no_sample_matches_the_joint_name_and_what_is_skipped(
     bag: Path, tmp_path: Path, capsys: pytest.CaptureFixture[str]
 ) -> None:
     argv = ["replay", str(bag), "--joint-states", "/joint_states", "--joint-name", "wrong"]
-    out = tmp_path / "out.mcap"
-    assert main([*argv, "--out", str(out)]) == 2
+    out, report, metrics = tmp_path / "a" / "out.mcap", tmp_path / "r", tmp_path / "m" / "m.json"
+    outputs = ["--out", str(out), "--report", str(report), "--metrics-json", str(metrics)]
+    assert main([*argv, *outputs]) == 2
     captured = capsys.readouterr()
     assert "rejected" in captured.out  # the summary first
     assert "'wrong'" in captured.err and "'prsm_motor'" in captured.err
     assert "rejected as non_finite" in captured.err
-    # The output of a failed replay is not left behind to block the rerun (found in review).
-    assert f"(the output bag {out} is not kept)" in captured.err and not out.exists()
+    # The output of a failed replay is not left behind to block the rerun (found in review),
+    # nor the folders made for the outputs.
+    assert f"(the output bag {out} is not kept)" in captured.err
+    assert sorted(tmp_path.iterdir()) == []
+    # Refused options make no folder either (they did, before the option was checked).
+    assert main(["replay", str(bag), "--joint-name", "j1", *outputs]) == 2
+    assert "--joint-name: applies only" in capsys.readouterr().err
+    assert sorted(tmp_path.iterdir()) == []
 
     no_truth = tmp_path / "no-truth"
     with BagWriter(no_truth) as writer:
@@ -443,11 +450,14 @@ def test_cli_reports_damage_first_when_nothing_before_it_was_accepted(
     shutil.copytree(bag, damaged)
     mcap = next(damaged.glob("*.mcap"))
     mcap.write_bytes(mcap.read_bytes()[:100])
-    written = tmp_path / "out"
-    assert main(["replay", str(damaged), "--out", str(written)]) == 1
+    written, report = tmp_path / "outputs" / "out", tmp_path / "report"
+    argv = ["replay", str(damaged), "--out", str(written), "--report", str(report)]
+    assert main(argv) == 1
     out = capsys.readouterr().out
-    assert "DAMAGED" in out and "no sample of" in out
-    assert out.splitlines()[-1] == f"  wrote bag {written}"  # it was written, not said
+    assert "DAMAGED" in out and "(no estimate from what was read before it)" in out
+    # Nothing is left to block the rerun (it kept an empty bag and folders, found in review).
+    assert out.splitlines()[-1].endswith(f"(the output bag {written} is not kept)")
+    assert not report.exists() and not written.parent.exists()
 
 
 def test_a_truth_with_a_non_finite_value_is_scored_up_to_it(
@@ -508,6 +518,7 @@ def test_metrics_that_cannot_be_computed_are_null_in_the_json(
     scores = json.loads(metrics.read_text(), parse_constant=refuse)
     assert scores["load_rmse_n"] is None and scores["load_nees_mean"] is None
     assert scores["load_nees_consistent"] is None  # not tested, not failed (it read false)
+    assert scores["load_nees_interval"] is None  # it read [null, null]
 
 
 def test_params_with_another_block_size_still_replay(bag: Path) -> None:

@@ -98,8 +98,9 @@ class Metrics:
     load_rmse_percent_rated: float
     load_max_error_n: float
     load_nees_mean: float
-    load_nees_interval: tuple[float, float]
-    #: None when no estimate was loaded and moving (nothing to test), as the mean is NaN.
+    #: None, as ``load_nees_consistent``, when no estimate was loaded and moving (nothing to
+    #: test); the mean is NaN then.
+    load_nees_interval: tuple[float, float] | None
     load_nees_consistent: bool | None
     load_standstill_rmse_n: float
     load_standstill_max_error_n: float
@@ -217,7 +218,7 @@ def _nothing_scored(beyond: int, offsets: tuple[float, ...]) -> Metrics:
     values.update(
         estimates=0,
         moving_estimates=0,
-        load_nees_interval=(math.nan, math.nan),
+        load_nees_interval=None,
         load_nees_consistent=None,
         jams=(),
         false_jam_declarations=0,
@@ -314,11 +315,11 @@ def _time_lines(states: list[HealthState]) -> tuple[list[slice], float]:
 
 def _nees_test(
     stamps: FloatArray, nees: FloatArray
-) -> tuple[float, tuple[float, float], bool | None]:
+) -> tuple[float, tuple[float, float] | None, bool | None]:
     """Mean NEES of one estimate per second, its 95 % chi-square interval and whether it lies
-    inside (NaN and None without a value to test)."""
+    inside (NaN, None and None without a value to test)."""
     if nees.size == 0:
-        return math.nan, (math.nan, math.nan), None
+        return math.nan, None, None
     seconds = np.floor(stamps - stamps[0]).astype(np.int64)
     first = np.flatnonzero(np.r_[True, seconds[1:] != seconds[:-1]])
     thinned = nees[first]
