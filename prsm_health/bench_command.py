@@ -30,6 +30,7 @@ from prsm_health.benchmark import (
     select,
 )
 from prsm_health.benchmark_report import FILES, write_results
+from prsm_health.output_paths import make_folder, remove_made_folders
 from prsm_health.physics.errors import ParameterError
 
 
@@ -37,7 +38,13 @@ def add_bench_command(commands: Any) -> None:
     """Register ``bench`` on the CLI's subparsers."""
     parser = commands.add_parser("bench", help="benchmark the estimator: run time against error")
     parser.add_argument("--quick", action="store_true", help="CI-sized run (under 2 minutes)")
-    parser.add_argument("--out", type=Path, default=Path("build/bench"), metavar="DIR")
+    parser.add_argument(
+        "--out",
+        type=Path,
+        default=Path("build/bench"),
+        metavar="DIR",
+        help=f"folder for {', '.join(FILES)} (made if needed; default build/bench)",
+    )
     parser.add_argument(
         "--scenes",
         nargs="+",
@@ -64,7 +71,14 @@ def add_bench_command(commands: Any) -> None:
         help="estimator parameters to benchmark instead of the bundled config/default.yaml "
         "(each scene's actuator still comes from the scene)",
     )
-    parser.add_argument("--bags", type=Path, default=DEFAULT_BAGS, metavar="DIR")
+    parser.add_argument(
+        "--bags",
+        type=Path,
+        default=DEFAULT_BAGS,
+        metavar="DIR",
+        help="the scene bags, each named after its scene as `make bags` writes them "
+        "(default: the bundled bags/)",
+    )
     parser.set_defaults(handler=run_bench)
 
 
@@ -90,12 +104,16 @@ def run_bench(args: argparse.Namespace) -> int:
         try:  # checked before anything runs, and named by the option
             base_params(args.params)
         except ParameterError as exc:
-            raise ValueError(f"--params {args.params}: {exc}") from exc
+            raise ValueError(f"--params: {exc}") from exc  # the error names the file
         plan = dataclasses.replace(
             plan, params_file=args.params, mode=f"{plan.mode}, parameters {args.params}"
         )
-    results = run_benchmark(plan)
-    floors = write_results(results, args.out)
+    made = make_folder(args.out, "--out")  # now, not after the run
+    try:
+        results = run_benchmark(plan)
+        floors = write_results(results, args.out)
+    finally:
+        remove_made_folders(made)  # still empty: the run failed
     print(f"{args.out}: {', '.join(FILES)} ({results.elapsed_s / 60:.1f} min)")
     for floor in floors:
         verdict = {True: "pass", False: "FAIL", None: "-"}[floor.passed]

@@ -55,6 +55,7 @@ from prsm_health.estimation.params import (
     Fidelity,
     bundled_params_file,
     load_params,
+    load_params_mapping,
 )
 from prsm_health.replay import CHUNK_SAMPLES, replay
 from prsm_health.scenes.profiles import DownholeCycle
@@ -573,8 +574,13 @@ class BenchResults:
 
 
 def base_params(path: Path | None = None) -> EstimatorParams:
-    """The estimator parameters of ``path``, or the bundled ones (config/default.yaml)."""
-    return load_params(path if path is not None else bundled_params_file())
+    """The estimator parameters of ``path``, or the bundled ones (config/default.yaml). A file
+    of settings only (no ``actuator:`` section) is taken as ``prsm-health replay`` takes it:
+    each scene's actuator completes it (:func:`params_for`; until then the bundled one)."""
+    bundled = bundled_params_file()
+    if path is None:
+        return load_params(bundled)
+    return load_params(path, actuator_if_none=load_params_mapping(bundled)["actuator"])
 
 
 def params_for(

@@ -25,6 +25,7 @@ from prsm_health.benchmark import (
     BenchScene,
     JamOnset,
     Plan,
+    base_params,
     cycle_period_s,
     full_plan,
     one_jam_scenes,
@@ -484,8 +485,30 @@ def test_cli_names_an_invalid_parameter_file(
     bad.write_text("actuator: {preset: dong2022-downhole}\nmodel: {jam_rate_per_h: -1}\n")
     assert main(["bench", "--params", str(bad), "--scenes", "two-jam-1", "--out", "unused"]) == 2
     error = capsys.readouterr().err
-    assert f"--params {bad}" in error and "jam_rate_per_h" in error
+    assert f"--params: {bad}: model.jam_rate_per_h" in error and error.count(str(bad)) == 1
     assert not Path("unused").exists()
+    # A file of settings only, as replay takes it (it was refused: 'actuator: missing'), and
+    # its bad key named rather than the missing actuator.
+    settings = tmp_path / "settings.yaml"
+    settings.write_text("model: {jam_rate_per_h: 0.01}\n")
+    assert base_params(settings).model.jam_rate_per_h == 0.01
+    settings.write_text("filter: {gate_nys: 3}\n")
+    assert main(["bench", "--params", str(settings), "--scenes", "two-jam-1"]) == 2
+    assert f"--params: {settings}: filter.gate_nys: unknown key" in capsys.readouterr().err
+
+
+def test_cli_refuses_an_out_it_cannot_write_before_the_run(
+    tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    """--out names a file: refused at once (it failed with a traceback after the whole run,
+    its results lost; found by a review session)."""
+    a_file = tmp_path / "results"
+    a_file.write_text("mine")
+    assert main(["bench", "--quick", "--out", str(a_file)]) == 2
+    captured = capsys.readouterr()
+    assert f"--out: cannot make the folder {a_file}" in captured.err
+    assert "bench:" not in captured.err, "nothing ran"
+    assert a_file.read_text() == "mine"
 
 
 def test_every_configuration_has_its_own_pareto_style() -> None:

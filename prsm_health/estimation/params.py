@@ -430,11 +430,15 @@ def load_params_mapping(path: Path) -> dict[str, Any]:
     return preset_beside_file(load_yaml_mapping(path), path)
 
 
-def load_params(path: str | Path) -> EstimatorParams:
-    """Load a params YAML file; errors name the file (and the bad key)."""
+def load_params(path: str | Path, *, actuator_if_none: Any = None) -> EstimatorParams:
+    """Load a params YAML file; errors name the file (and the bad key). ``actuator_if_none``:
+    the ``actuator:`` section of a file that has none (settings only), if given."""
     path = Path(path)
     try:
-        return params_from_mapping(load_params_mapping(path))
+        data = load_params_mapping(path)
+        if actuator_if_none is not None:
+            data = {"actuator": actuator_if_none, **data}
+        return params_from_mapping(data)
     except YamlError as exc:
         raise ParameterError("params", str(exc)) from exc
     except ParameterError as exc:
