@@ -16,19 +16,28 @@ from typing import Any
 
 import yaml
 
-from prsm_health.estimation.params import bundled_params_file, load_params_mapping
+from prsm_health.estimation.params import (
+    bundled_params_file,
+    load_params_mapping,
+    params_from_mapping,
+)
+from prsm_health.output_paths import make_folder, remove_made_folders
+from prsm_health.physics.errors import ParameterError
 from prsm_health.scenes.recording import SceneActuator, bag_actuator
 from prsm_health.yamlio import YamlError
 
 
 def params_with_actuator(base: Path, scene: SceneActuator) -> dict[str, Any]:
-    """The parameters of ``base`` with the actuator of ``scene`` instead of theirs.
+    """The parameters of ``base`` with the actuator of ``scene`` instead of theirs, checked as
+    the node will check them.
 
     Raises:
         YamlError: ``base`` cannot be read.
+        ParameterError: a key or value of ``base`` that the node would refuse.
     """
     params = load_params_mapping(base)
     params["actuator"] = scene.section
+    params_from_mapping(params)
     return params
 
 
@@ -79,10 +88,14 @@ def _run_node_params(args: argparse.Namespace) -> int:
         params = params_with_actuator(base, scene)
     except YamlError as exc:
         raise ValueError(f"--params: {exc}") from exc
+    except ParameterError as exc:  # what the node would refuse at configure
+        raise ValueError(f"--params: {base}: {exc}") from exc
+    made = make_folder(args.out.parent, "--out")
     try:
         args.out.write_text(yaml.safe_dump(params, sort_keys=False), encoding="utf-8")
     except OSError as exc:
-        raise ValueError(f"--out: {exc}") from exc
+        remove_made_folders(made)
+        raise ValueError(f"--out: cannot write {args.out}: {exc}") from exc
     print(
         f"wrote {args.out}: {base} with the actuator of {scene.origin} (wear x "
         f"{scene.actuator.wear_acceleration:g}); start the node with "

@@ -212,6 +212,23 @@ def test_node_params_writes_the_bundled_parameters_with_the_bags_actuator(
     assert load_params(out).actuator == load_scene("sudden-jam").actuator
     assert main(["node-params", str(renamed), "--out", str(out)]) == 2  # not overwritten
     assert capsys.readouterr().err == f"prsm-health: error: --out: {out} exists\n"
+    nested = tmp_path / "new" / "folder" / "node.yaml"  # it said [Errno 2]
+    assert main(["node-params", str(renamed), "--out", str(nested)]) == 0
+    assert load_params(nested).actuator == load_scene("sudden-jam").actuator
+
+
+def test_node_params_refuses_what_the_node_would_refuse(
+    renamed: Path, tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    """A params file with an unknown key was written out, and the node then failed to
+    configure with it (found by a review session)."""
+    bad = tmp_path / "bad.yaml"
+    bad.write_text("filter:\n  gate_nys: 3\n")
+    out = tmp_path / "node" / "node.yaml"
+    assert main(["node-params", str(renamed), "--out", str(out), "--params", str(bad)]) == 2
+    err = capsys.readouterr().err
+    assert err.startswith(f"prsm-health: error: --params: {bad}: filter.gate_nys: unknown key")
+    assert err.count("\n") == 1 and not out.parent.exists()
 
 
 def test_a_bag_without_a_record_gets_no_node_params_and_no_play_note(
