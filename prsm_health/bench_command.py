@@ -22,7 +22,6 @@ from typing import Any
 
 from prsm_health.benchmark import (
     CONFIGURATION_NAMES,
-    DEFAULT_BAGS,
     base_params,
     full_plan,
     quick_plan,
@@ -32,6 +31,7 @@ from prsm_health.benchmark import (
 from prsm_health.benchmark_report import FILES, write_results
 from prsm_health.output_paths import make_folder, remove_made_folders
 from prsm_health.physics.errors import ParameterError
+from prsm_health.scenes.scene import BUNDLED_BAGS
 
 
 def add_bench_command(commands: Any) -> None:
@@ -74,7 +74,7 @@ def add_bench_command(commands: Any) -> None:
     parser.add_argument(
         "--bags",
         type=Path,
-        default=DEFAULT_BAGS,
+        default=BUNDLED_BAGS,
         metavar="DIR",
         help="the scene bags, each named after its scene as `make bags` writes them "
         "(default: the bundled bags/)",

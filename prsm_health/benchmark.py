@@ -59,7 +59,7 @@ from prsm_health.estimation.params import (
 )
 from prsm_health.replay import CHUNK_SAMPLES, replay
 from prsm_health.scenes.profiles import DownholeCycle
-from prsm_health.scenes.scene import Scene, scene_from_mapping
+from prsm_health.scenes.scene import BUNDLED_BAGS, Scene, scene_from_mapping
 from prsm_health.scenes.simulator import simulate
 from prsm_health.signals import MotorSamples, TruthSamples
 from prsm_health.yamlio import load_yaml_mapping
@@ -67,8 +67,6 @@ from prsm_health.yamlio import load_yaml_mapping
 LOG = logging.getLogger(__name__)
 
 RPM_TO_RAD_S = 2.0 * math.pi / 60.0
-#: The bundled bags of a source checkout (``--bags`` points elsewhere).
-DEFAULT_BAGS = Path(__file__).resolve().parents[1] / "bags"
 BAG_SCENES = (
     "nominal-downhole",
     "sudden-jam",
@@ -309,7 +307,7 @@ def held_out_seeds(seed: int) -> dict[str, int]:
     return seeds
 
 
-def full_plan(bags: Path = DEFAULT_BAGS, *, held_out: int | None = None) -> Plan:
+def full_plan(bags: Path = BUNDLED_BAGS, *, held_out: int | None = None) -> Plan:
     """Every configuration on every scene of issue 6 (about half an hour on 2 cores). With
     ``held_out``, the generated groups are drawn from other seeds (:func:`held_out_seeds`)."""
     seeds = (
@@ -350,7 +348,7 @@ def full_plan(bags: Path = DEFAULT_BAGS, *, held_out: int | None = None) -> Plan
     )
 
 
-def quick_plan(bags: Path = DEFAULT_BAGS) -> Plan:
+def quick_plan(bags: Path = BUNDLED_BAGS) -> Plan:
     """A CI-sized run (well under 2 minutes): one bag, one two-jam run, three configurations,
     3,000 per-sample timings (2 s at rest, 1 s of stroke), three short wear-prior runs; no
     naive excerpt."""

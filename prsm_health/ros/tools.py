@@ -15,10 +15,11 @@ from typing import TypeVar
 
 from prsm_health.interrupt import EXIT_INTERRUPTED
 from prsm_health.node_params import accelerated_wear_note
+from prsm_health.scenes.scene import BUNDLED_BAGS
 
 Parser = TypeVar("Parser", bound=argparse.ArgumentParser)
 #: The scene bag ``make demo`` plays (made by ``prsm-health simulate``, see bags/).
-DEMO_BAG = Path("bags", "sudden-jam")
+DEMO_BAG = BUNDLED_BAGS / "sudden-jam"
 
 
 def number_or_nan(text: str) -> float:
@@ -214,6 +215,8 @@ def _run_demo(args: argparse.Namespace) -> int:
     from prsm_health.ros.player import PlayOptions
 
     PlayOptions(rate=args.rate)  # the demo's player's rate: refused here, as play refuses it
+    if not args.bag.exists():
+        raise ValueError(f"--bag: {args.bag} does not exist")
     try:
         return run_demo(args.bag, rate=args.rate, timeout_s=args.timeout, workdir=args.workdir)
     except DemoError as exc:

@@ -34,6 +34,9 @@ from prsm_health.scenes.sensors import Sensors
 from prsm_health.scenes.validation import flag, integer, items, number, prefixed, section, text
 from prsm_health.yamlio import YamlError, load_yaml_mapping
 
+#: The bags of the bundled scenes in a source checkout (``make bags`` writes them).
+BUNDLED_BAGS = Path(__file__).resolve().parents[2] / "bags"
+
 
 @dataclass(frozen=True, kw_only=True)
 class Jam:

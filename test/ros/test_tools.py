@@ -33,6 +33,7 @@ from prsm_health.ros.monitor import (
     table,
 )
 from prsm_health.ros.player import ACK_TIMEOUT_S
+from prsm_health.ros.tools import DEMO_BAG
 from prsm_health.signals import MotorSamples
 from test.bags.samples import streamed_messages
 from test.conftest import REPO
@@ -92,6 +93,14 @@ def test_play_refuses_rates_out_of_range(tmp_path: Path) -> None:
     demo = cli("demo", "--bag", str(tmp_path / "none"), "--rate", "1e-300")
     expected = "prsm-health: error: --rate must be within 0.001 .. 1e+06, got 1e-300\n"
     assert (demo.returncode, demo.stderr) == (2, expected)
+    demo = cli("demo", "--bag", str(tmp_path / "none"))
+    expected = f"prsm-health: error: --bag: {tmp_path / 'none'} does not exist\n"
+    assert (demo.returncode, demo.stderr) == (2, expected)  # a usage error; it said 1
+
+
+def test_the_demo_bag_does_not_depend_on_the_working_directory() -> None:
+    """``prsm-health demo`` run outside the checkout looked for bags/sudden-jam there."""
+    assert DEMO_BAG.is_absolute() and (DEMO_BAG / "metadata.yaml").is_file()
 
 
 def test_play_waits_out_a_gap_longer_than_a_wait_can_be(ros: None, tmp_path: Path) -> None:
