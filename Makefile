@@ -93,7 +93,10 @@ bags-check: venv
 	for scene in $(BAG_SCENES); do \
 	  $(VENV)/bin/prsm-health simulate --scene $$scene --out $(BAG_CHECK_DIR)/$$scene; \
 	  cmp bags/$$scene/metadata.yaml $(BAG_CHECK_DIR)/$$scene/metadata.yaml; \
-	  cmp bags/$$scene/$$scene.mcap $(BAG_CHECK_DIR)/$$scene/$$scene.mcap; \
+	  cmp bags/$$scene/$$scene.mcap $(BAG_CHECK_DIR)/$$scene/$$scene.mcap || { \
+	    echo "bags-check: $$scene differs; on another kind of CPU than the one that wrote" \
+	      "bags/ the truth's last bits do (bags/README.md): pytest" \
+	      "test/scenes/test_bags.py compares what the bags say"; exit 1; }; \
 	done
 	@echo "bags: all $(words $(BAG_SCENES)) regenerate byte for byte"
 
