@@ -179,8 +179,10 @@ def _load_figure(series: _Series, truth: TruthSamples | None, *, xlabel: str, ti
         low, high = float(shown.min()), float(shown.max())
         margin = LOAD_AXIS_MARGIN * max(high - low, SMALLEST_LOAD_SPAN_KN)
         axis.set_ylim(low - margin, high + margin)
-    axis.set(ylabel="axial load [kN]", title=f"{title}: axial load")
-    axis.legend(loc="best")
+    axis.set_ylabel("axial load [kN]")
+    # The legend above the axes, right of the title: inside, it covers strokes on a long run.
+    axis.set_title(f"{title}: axial load", loc="left")
+    axis.legend(loc="lower right", bbox_to_anchor=(1.0, 1.0), ncols=6, fontsize=8, frameon=False)
     return figure
 
 
@@ -231,10 +233,11 @@ def write_report(
     if truth is not None:
         axis2 = axis.twinx()
         handles += axis2.step(
-            truth.stamp_s, truth.jammed_rollers, "k--", lw=0.8, where="post", label="true count"
+            truth.stamp_s, truth.jammed_rollers, "k--", lw=1.6, where="post", label="true count"
         )
         axis2.set_ylabel("true jammed rollers")
-        axis2.set_ylim(-0.1, max(2, int(truth.jammed_rollers.max()) + 1))
+        # Half a count of margin: a count of 0 on the axis' edge was hard to see.
+        axis2.set_ylim(-0.5, max(2, int(truth.jammed_rollers.max()) + 1) + 0.5)
         axis2.yaxis.set_major_locator(MaxNLocator(integer=True))
     handles += _mark_events(axis, series)
     axis.set(xlabel=xlabel, ylabel="probability", ylim=(0, 1), title=f"{title}: jams")
