@@ -47,7 +47,7 @@ from rcl_interfaces.msg import (
 from rclpy.clock import Clock
 from rclpy.clock_type import ClockType
 from rclpy.exceptions import InvalidParameterTypeException, InvalidParameterValueException
-from rclpy.executors import SingleThreadedExecutor
+from rclpy.executors import ExternalShutdownException, SingleThreadedExecutor
 from rclpy.impl.implementation_singleton import rclpy_implementation as _rclpy
 from rclpy.lifecycle import LifecycleNode, LifecycleState, TransitionCallbackReturn
 from rclpy.parameter import Parameter
@@ -308,7 +308,7 @@ class HealthNode(LifecycleNode):
                 array = diagnostic_array([self._configure_failure], self._now_s())
                 self._configure_failure_pub.publish(array)
         except Exception as exc:
-            self._fault("diagnostics", exc)
+            self.fault("diagnostics", exc)
 
     def _end_configure_failure(self) -> None:
         """Stop reporting a failed configure (one succeeded, or the node shuts down)."""
@@ -474,9 +474,11 @@ class HealthNode(LifecycleNode):
             )
             self._frame_id = msg.header.frame_id
         except Exception as exc:
-            self._fault(f"{type(msg).__name__} input", exc)
+            self.fault(f"{type(msg).__name__} input", exc)
 
-    def _fault(self, where: str, exc: BaseException) -> None:
+    def fault(self, where: str, exc: BaseException) -> None:
+        """Count and log an exception caught around ``where`` (the filter-consistency status
+        names the latest)."""
         events = self._tracker.events
         events.error(self._now_s(), f"{where}: {exc!r}")
         self.get_logger().error(
@@ -506,7 +508,7 @@ class HealthNode(LifecycleNode):
                 states += estimator.finish(end_of_data=end_of_data)
             self._handle_estimates(estimator, config, states, received)
         except Exception as exc:
-            self._fault("processing", exc)
+            self.fault("processing", exc)
 
     def _handle_estimates(
         self,
@@ -543,7 +545,7 @@ class HealthNode(LifecycleNode):
             if self._latest is not None and not self._latest_published:
                 self._publish_health(self._latest)
         except Exception as exc:
-            self._fault("health", exc)
+            self.fault("health", exc)
 
     def _on_diagnostics(self) -> None:
         try:
@@ -559,7 +561,7 @@ class HealthNode(LifecycleNode):
             statuses.append(persistence_status(self._persistence, config.hardware_id, now))
             self._diagnostics_pub.publish(diagnostic_array(statuses, now))
         except Exception as exc:
-            self._fault("diagnostics", exc)
+            self.fault("diagnostics", exc)
 
     def _on_reset(self, request: Any, response: Any) -> Any:
         """``~/reset_after_maintenance``: the samples received so far are estimated first
@@ -597,7 +599,7 @@ class HealthNode(LifecycleNode):
         except ValueError as exc:
             response.success, response.message = False, f"nothing reset: {exc}"
         except Exception as exc:
-            self._fault("reset", exc)
+            self.fault("reset", exc)
             response.success, response.message = False, f"nothing reset: {exc!r}"
         return response
 
@@ -605,7 +607,7 @@ class HealthNode(LifecycleNode):
         try:
             self._save()
         except Exception as exc:
-            self._fault("save", exc)
+            self.fault("save", exc)
 
     def _save(self) -> None:
         """Save the state if samples came since the last successful save, or a reset cleared
@@ -659,7 +661,15 @@ def main(argv: Sequence[str] | None = None) -> int:
         try:
             node.autostart()
             while not stop.is_set() and ok():
-                executor.spin_once(timeout_sec=SPIN_TIMEOUT_S)
+                try:
+                    executor.spin_once(timeout_sec=SPIN_TIMEOUT_S)
+                except ExternalShutdownException:
+                    raise
+                except Exception as exc:
+                    # A callback of rclpy's own raised on a malformed message (a negative
+                    # /clock, a parameter of an unknown type): that message is lost, the node
+                    # and its state are not.
+                    node.fault("a ROS callback", exc)
             if not node.finalized:  # a lifecycle shutdown may have come over its services
                 node.trigger_shutdown()
         finally:

@@ -9,8 +9,13 @@ import time
 from pathlib import Path
 
 import pytest
-from rcl_interfaces.srv import SetParametersAtomically
+from builtin_interfaces.msg import Time
+from rcl_interfaces.msg import Parameter as ParameterMsg
+from rcl_interfaces.msg import ParameterValue
+from rcl_interfaces.srv import SetParameters, SetParametersAtomically
 from rclpy.parameter import Parameter
+from rclpy.qos import QoSProfile, QoSReliabilityPolicy
+from rosgraph_msgs.msg import Clock
 
 from prsm_health.outputs import CONFIGURATION, INPUT_HEALTH
 from prsm_health.ros.parameters import PARAMETERS
@@ -256,3 +261,42 @@ def test_a_second_signal_during_shutdown_keeps_the_clean_exit(
         time.sleep(second_after_s)
         assert stop_process(node.process, signal.SIGINT) == 0, node.log()
     assert state_file.exists()
+
+
+@pytest.mark.timeout(60)
+def test_a_malformed_clock_or_parameter_message_costs_the_node_nothing(
+    ros: None, tmp_path: Path
+) -> None:
+    """rclpy's own callbacks raise on a negative /clock and on a parameter value of an unknown
+    type: the node ended with a traceback and without saving its state (found by a review
+    session). The message is lost and counted, the node goes on and saves its state."""
+    listener = Listener("odd_msgs")
+    reliable = QoSProfile(depth=10, reliability=QoSReliabilityPolicy.RELIABLE)
+    clock = listener.node.create_publisher(Clock, "/clock", reliable)
+    state = tmp_path / "state.json"
+    try:
+        with NodeProcess(tmp_path, "odd_msgs", use_sim_time=True, state_file=str(state)) as node:
+            node.wait_log("configured")
+            listener.wait_for(lambda: clock.get_subscription_count() > 0, 20.0, "/clock")
+            clock.publish(Clock(clock=Time(sec=100)))
+            clock.publish(Clock(clock=Time(sec=-1)))
+            node.wait_log("a ROS callback: ValueError('Seconds value must not be negative')")
+            request = SetParameters.Request(
+                parameters=[ParameterMsg(name="joint_name", value=ParameterValue(type=10))]
+            )
+            client = listener.node.create_client(SetParameters, "/odd_msgs/set_parameters")
+            assert client.wait_for_service(timeout_sec=10.0)
+            time.sleep(1.1)  # the node logs errors at most once a second
+            client.call_async(request)  # no answer comes: the service's callback raised
+            node.wait_log("a ROS callback: ValueError('10 is not a valid Parameter.Type')")
+            assert listener.set_parameter("joint_name", "x") == (
+                False,
+                "parameter joint_name is applied at configure: deactivate and clean up the "
+                "node first",
+            )  # the services still answer
+            assert listener.lifecycle_state() == "active"
+            assert node.alive()
+            assert stop_process(node.process) == 0
+        assert "the state is saved" in node.log() and state.is_file()
+    finally:
+        listener.close()
