@@ -704,15 +704,17 @@ class JamHypotheses:
         reset or a divergence; after a hole in the data, where the load may have moved on).
         A forgotten load keeps its mean as the start of its re-acquisition, unless that lies
         beyond the divergence bound (EstimatorParams.diverged_load_n): then it starts from
-        zero."""
-        forget = slice(LOAD_RATE if keep_load else LOAD, LOAD_STATES)
+        zero. A load or load standard deviation beyond that bound is never kept: after a
+        restore (a hole) such a one came from a damaged state file, and the wear integrated
+        at it was poisoned for good (4e74 um of precision loss, found by a review session)."""
         diverged = self._params.diverged_load_n
         for h in self.hypotheses:
             x, p = h.filter.x.copy(), h.filter.P.copy()
-            if not keep_load and abs(float(x[LOAD])) > diverged:
+            keep = keep_load and abs(float(x[LOAD])) <= diverged and p[LOAD, LOAD] <= diverged**2
+            if not keep and abs(float(x[LOAD])) > diverged:
                 x[LOAD] = 0.0
             x[LOAD_RATE:LOAD_STATES] = 0.0
-            self._forget(p, forget)
+            self._forget(p, slice(LOAD_RATE if keep else LOAD, LOAD_STATES))
             h.filter.x, h.filter.P = x, p
 
     def most_likely(self) -> Hypothesis:

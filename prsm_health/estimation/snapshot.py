@@ -24,8 +24,9 @@ SNAPSHOT_FORMAT = 2
 #: filter reaches comes near it (predictions are capped at one second); a larger one is a
 #: damaged file, and it would overflow once symmetrised.
 SNAPSHOT_LARGEST_VALUE = 1e100
-#: A restored sample counter must stay below this: the messages carry the counts as uint64
-#: (accepted plus rejected, and the counts that follow). 2^62 samples at 1 kHz are 146 My.
+#: The restored sample counters must sum to less than this: the messages carry the counts as
+#: uint64 and the input stage adds them up in int64 (three counts of 2^62 - 1 each passed a
+#: check of each alone and overflowed every block after). 2^62 samples at 1 kHz are 146 My.
 SNAPSHOT_LARGEST_COUNT = 2**62
 
 
@@ -165,12 +166,14 @@ def read_snapshot(
             f"degradation values must be >= 0 and < {SNAPSHOT_LARGEST_VALUE:g}: {degradation}"
         )
     counts = [accepted, *rejected]
-    if len(rejected) != rejection_reasons or not all(
-        0 <= n < SNAPSHOT_LARGEST_COUNT for n in counts
+    if (
+        len(rejected) != rejection_reasons
+        or not all(n >= 0 for n in counts)
+        or sum(counts) >= SNAPSHOT_LARGEST_COUNT
     ):
         raise SnapshotError(
-            f"sample counters: {rejection_reasons} rejection reasons expected, "
-            f"each count in [0, 2^62), got {len(rejected)} reasons, counts {counts}"
+            f"sample counters: {rejection_reasons} rejection reasons expected, each count "
+            f">= 0 and their sum below 2^62, got {len(rejected)} reasons, counts {counts}"
         )
     if foreign is not None:
         raise ForeignStateError(foreign)
@@ -203,7 +206,9 @@ def _saved_hypothesis(
     entry: dict[str, Any], *, state_dim: int, largest_count: float, filter_state_used: bool
 ) -> SavedHypothesis:
     """One entry of a snapshot's "hypotheses", checked; its filter state (x, P) only when it
-    will be used (``filter_state_used``: the drive train and model are unchanged)."""
+    will be used (``filter_state_used``: the drive train and model are unchanged). A load
+    beyond the divergence bound passes: the resume forgets it
+    (:meth:`~prsm_health.estimation.hypotheses.JamHypotheses.reinitialise_load`)."""
     k = int(entry["count"])
     x = np.asarray(entry["x"], dtype=np.float64)
     p = np.asarray(entry["P"], dtype=np.float64)

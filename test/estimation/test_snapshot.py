@@ -153,6 +153,8 @@ def test_an_unpruned_bank_restarts_every_count_with_its_probability() -> None:
         # Fewer rejection reasons (an older file): the counters would fail at the next one.
         lambda s: s.update(samples_rejected=[0, 0, 0]),
         lambda s: s.update(samples_accepted=-1),
+        # Each below 2^62, their sum beyond int64: every block after overflowed (a review).
+        lambda s: s.update(samples_rejected=[2**62 - 1] * 3 + [0] * 2),
     ],
 )
 def test_a_malformed_state_is_refused(damage: object) -> None:
@@ -178,6 +180,32 @@ def test_a_restored_ripple_far_beyond_its_prior_gives_finite_estimates() -> None
     restored.restore(saved)
     states = restored.process(samples[1500:]) + restored.finish()
     assert states and all(math.isfinite(s.axial_load_n) for s in states)
+
+
+@pytest.mark.parametrize("damaged", ["x", "P", "load"])
+def test_a_restored_load_beyond_the_divergence_bound_is_forgotten(damaged: str) -> None:
+    """A state file's filter states (x) or covariances (P) of 9.9e99, within the snapshot's
+    bounds but beyond the divergence bound, in every hypothesis: resumed as they were, the
+    wear integrated at them gave 2e73 um of precision loss (or a standard deviation of 6e25
+    um), saved for good (found by a review session). The resume re-acquires such a load from
+    zero, as after a divergence; a load of -3 MN alone was caught by the divergence test."""
+    first = HealthEstimator(params())
+    before = first.process(moving(2.0))
+    saved = json.loads(json.dumps(first.snapshot()))
+    for h in saved["hypotheses"]:
+        if damaged == "x":
+            h["x"] = [9.9e99] * 5
+        elif damaged == "P":
+            h["P"] = [[9.9e99] * 5 for _ in range(5)]
+        else:
+            h["x"][0] = -3e6
+    resumed = HealthEstimator(params())
+    resumed.restore(saved)
+    after = resumed.process(moving(2.0, start_s=2.0)) + resumed.finish()
+    loss_um = [s.precision_loss_m * 1e6 for s in (before[-1], after[-1])]
+    assert loss_um[1] - loss_um[0] < 2.0 * loss_um[0]  # 2 s more of the same wear
+    assert after[-1].precision_loss_std_m < 10.0 * before[-1].precision_loss_std_m
+    assert abs(after[-1].axial_load_n - before[-1].axial_load_n) < 0.05 * params().load_scale_n
 
 
 def test_an_unpruned_bank_with_ruled_out_counts_is_saved_and_restored() -> None:
