@@ -29,7 +29,8 @@ from __future__ import annotations
 import dataclasses
 import math
 import sys
-from collections import Counter
+import time
+from collections import Counter, defaultdict
 from collections.abc import Sequence
 from difflib import get_close_matches
 from typing import Any
@@ -98,8 +99,19 @@ CONFIGURE_FAILED_PERIOD_S = 1.0
 SPIN_TIMEOUT_S = 0.1
 #: Parameters a configured node refuses to change: ours and the clock the diagnostics run on.
 APPLIED_AT_CONFIGURE = frozenset({*SPECS, "use_sim_time"})
-#: A maintenance note longer than this is logged cut, with its length.
-LOGGED_NOTE_CHARS = 500
+#: A text from a message (a maintenance note, a JointState's names) longer than this is
+#: logged cut, with its length: a 1 MB note, or 20,000 joint names, made one log line of it.
+LOGGED_TEXT_CHARS = 500
+#: A kind of input the node rejects is logged at most once per this long [s] (each kind
+#: apart: with one throttle for all, one kind hid another).
+REJECT_LOG_PERIOD_S = 5.0
+
+
+def _cut(text: str) -> str:
+    """``text`` for the log: at most LOGGED_TEXT_CHARS, with its length when cut."""
+    if len(text) <= LOGGED_TEXT_CHARS:
+        return text
+    return f"{text[:LOGGED_TEXT_CHARS]}... ({len(text)} characters)"
 
 
 def _descriptor(spec: ParameterSpec) -> ParameterDescriptor:
@@ -442,6 +454,8 @@ class HealthNode(LifecycleNode):
     def _reset_run_state(self) -> None:
         self._pending = _Pending()
         self._node_rejects: Counter[str] = Counter()
+        # When each kind was last logged (steady clock) [s].
+        self._reject_logged_s: defaultdict[str, float] = defaultdict(lambda: -math.inf)
         self._tracker = DiagnosticsTracker()
         self._latest, self._latest_restored = None, False
         self._latest_published = True
@@ -462,12 +476,15 @@ class HealthNode(LifecycleNode):
             if sample.problem:
                 self._node_rejects[sample.problem] += 1
                 self._pending.received += 1
-                self.get_logger().warning(
-                    f"JointState rejected ({sample.problem}): joint_name {config.joint_name!r},"
-                    f" the message has {list(msg.name)!r} with {len(msg.effort)} efforts,"
-                    f" {len(msg.velocity)} velocities, {len(msg.position)} positions",
-                    throttle_duration_sec=5.0,
-                )
+                now_s = time.monotonic()
+                if now_s - self._reject_logged_s[sample.problem] >= REJECT_LOG_PERIOD_S:
+                    self._reject_logged_s[sample.problem] = now_s
+                    self.get_logger().warning(
+                        f"JointState rejected ({sample.problem}): joint_name "
+                        f"{config.joint_name!r}, the message has {_cut(repr(list(msg.name)))}"
+                        f" with {len(msg.effort)} efforts, {len(msg.velocity)} velocities,"
+                        f" {len(msg.position)} positions"
+                    )
                 return
             self._pending.add(
                 sample.stamp_s, sample.current_a, sample.speed_rad_s, sample.position_rad
@@ -590,10 +607,7 @@ class HealthNode(LifecycleNode):
             reset += ["fatigue damage 0"] if request.reset_fatigue_damage else []
             response.success = True
             response.message = "reset after maintenance: " + ", ".join(reset)
-            note = request.note
-            if len(note) > LOGGED_NOTE_CHARS:  # a 1 MB note was one log line of 1 MB
-                note = f"{note[:LOGGED_NOTE_CHARS]}... ({len(request.note)} characters)"
-            self.get_logger().info(f"{response.message} (note: {note!r})")
+            self.get_logger().info(f"{response.message} (note: {_cut(request.note)!r})")
             self._saved_at_samples = -1  # changed without new samples: a failed save is retried
             self._save()
         except ValueError as exc:

@@ -69,7 +69,9 @@ def joint_states(samples: MotorSamples) -> list[Any]:
             msg.effort = [0.0]
         elif 308 <= i < 313:
             msg.effort = [0.0, math.nan]
-        elif 313 <= i < 315:
+        elif i == 313:  # the names of a careless stack: logged cut
+            msg.name = ["prsm_motor"] * 10_000
+        elif i == 314:
             msg.name = ["prsm_motor", "prsm_motor"]
         messages.append(msg)
     return messages
@@ -168,6 +170,12 @@ def test_malformed_inputs_are_counted_not_published(ros: None, tmp_path: Path) -
     assert (
         "JointState rejected (joint_missing): joint_name 'prsm_motor', the message has ['wheel']"
     ) in joint_log
+    # Each kind is logged (one throttle for all hid the second and third), and 10,000 names
+    # are cut (20,000 made a line of 629 kB; both found by a review session).
+    assert "JointState rejected (joint_incomplete)" in joint_log
+    assert "JointState rejected (joint_repeated)" in joint_log
+    assert "... (140000 characters) with 2 efforts" in joint_log
+    assert max(len(line) for line in joint_log.splitlines()) < 1000
 
 
 @pytest.mark.timeout(90)
