@@ -120,6 +120,8 @@ class InputHealth:
     stale timeout with long blocks or a slow stream.) stamp_rate: seconds
     by which the accepted samples' stamps advance per second of the caller's clock (the median
     over the last second; -1: not known, e.g. in an offline replay, whose clock is the stamps).
+    input_clock_s: the latest accepted sample's stamp (None: not known, as in an offline
+    replay).
     """
 
     rate_hz: float
@@ -132,6 +134,7 @@ class InputHealth:
     topic: str = ""
     rejecting_since_s: float | None = None
     stamp_rate: float = -1.0
+    input_clock_s: float | None = None
 
 
 @dataclass(frozen=True)
@@ -322,6 +325,11 @@ def _inputs(inputs: InputHealth, th: DiagnosticThresholds, now_s: float) -> _Par
     if rate >= 0.0 and not 1.0 / STAMP_RATE_LIMIT <= rate <= STAMP_RATE_LIMIT:
         problems.append(
             f"stamps advance {rate:.3g} s per second received (a clock in the wrong unit?)"
+        )
+    if inputs.input_clock_s is not None and inputs.input_clock_s < 0.0:
+        problems.append(
+            "stamps before 1970 (negative): the estimates go out stamped 0, as a ROS time"
+            " cannot be negative (estimate_stamp_s has their own)"
         )
     fraction = inputs.recent_rejected_fraction
     if fraction > 0.0 and fraction >= th.rejected_warn_fraction:

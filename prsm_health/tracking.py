@@ -57,6 +57,7 @@ class InputTracker:
         self._received: deque[tuple[float, int]] = deque()
         # (time, the inputs' clock) where it moved: how fast the stamps advance
         self._clock: deque[tuple[float, float]] = deque()
+        self._input_clock_s: float | None = None  # the latest input_clock_s given
         # time, newly accepted, newly rejected by reason
         self._judged: deque[tuple[float, int, dict[str, int]]] = deque()
         self._accepted = self._start_accepted = 0
@@ -107,6 +108,8 @@ class InputTracker:
             self._judged.clear()
         # Where the inputs' clock moves (its samples are accepted so far: the count of accepted
         # samples moves only as blocks close, every 10,000 samples on a clock that hardly moves).
+        if input_clock_s is not None:
+            self._input_clock_s = input_clock_s
         if input_clock_s is not None and (not self._clock or input_clock_s != self._clock[-1][1]):
             if self._clock and (now_s < self._clock[-1][0] or input_clock_s < self._clock[-1][1]):
                 self._clock.clear()  # either clock went back: compare from here
@@ -166,6 +169,7 @@ class InputTracker:
             topic=self.topic,
             rejecting_since_s=self._rejecting_since_s,
             stamp_rate=self._stamp_rate(),
+            input_clock_s=self._input_clock_s,
         )
 
     def _stamp_rate(self) -> float:

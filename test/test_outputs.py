@@ -201,6 +201,15 @@ def test_input_stamps_on_another_clock_than_the_nodes_are_named(
         assert f"stamps advance {stamp_rate:.3g} s per second received" in message
 
 
+@pytest.mark.parametrize(("input_clock_s", "warned"), [(None, False), (0.0, False), (-497.0, True)])
+def test_input_stamps_before_1970_are_named(input_clock_s: float | None, warned: bool) -> None:
+    """Stamps from -500 s: every estimate went out stamped 0 (a ROS time cannot be negative)
+    and every status read OK (found by a review session). None: not known (a replay)."""
+    level, message, _ = statuses(i=inputs(input_clock_s=input_clock_s))[INPUT_HEALTH]
+    assert (level == Level.WARN) == warned
+    assert ("stamps before 1970 (negative): the estimates go out stamped 0" in message) == warned
+
+
 def test_filter_consistency_reports_recent_problems() -> None:
     level, _, values = statuses()[FILTER_CONSISTENCY]
     assert level == Level.OK

@@ -91,6 +91,8 @@ def test_the_stamps_rate_against_the_callers_clock() -> None:
     silent.update(0.0, 10, 10, {})
     silent.update(0.9, 10, 20, {})
     assert silent.health(0.9).stamp_rate == -1.0
+    assert silent.health(0.9).input_clock_s is None  # never given
+    assert stepped.health(0.05 * 39).input_clock_s == 5.0 + 0.005 * 399  # the latest
 
 
 def test_input_that_stops_as_the_clock_jumps_back_goes_stale() -> None:
