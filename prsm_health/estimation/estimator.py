@@ -339,13 +339,28 @@ class HealthEstimator:
         loads, variances = self._load_moments()
         moving = block.direction != 0
         if moving or not self.params.fidelity.skip_standstill:
-            duration = min(block.duration_s, self.params.filter.max_gap_s)
+            duration = self._wear_duration_s(block)
             load_std = [math.sqrt(v) for v in variances]
             self._degradation.add(duration, weights, step.predictions, load_std)
         else:
             self._degradation.stop()
         self._last = self._state(block, step, weights, loads, variances, event)
         return self._last
+
+    def _wear_duration_s(self, block: Block) -> float:
+        """How long ``block`` stands for in the wear and fatigue integration: its duration, at
+        most ``filter.max_gap_s``; after a gap, of the gap only as long as the motor took to
+        turn as far as its positions say it did at the block's speed. Wear grows with the
+        travel, and the positions before and after a gap say how far it was: a motor that
+        stood still through the gap adds no wear, and stamps in milliseconds read as seconds
+        (every sample a gap of a second) added half a second of wear per sample, 500 times
+        too much, instead of the millisecond the motor turned for (found by a review)."""
+        duration = min(block.duration_s, self.params.filter.max_gap_s)
+        speed = abs(block.motor_speed_rad_s)
+        if not (block.after_gap and math.isfinite(block.travel_before_rad) and speed > 0.0):
+            return duration
+        turning_s = block.travel_before_rad / speed
+        return min(duration, block.duration_s - block.silence_before_s + turning_s)
 
     def _load_transition(self, block: Block) -> bool:
         """Whether a stroke starts (the first ``model.load_transition_s`` of a direction of

@@ -117,7 +117,9 @@ class Block:
     its straight-line trend in the block (a step inside the block, e.g. the onset of a jam,
     makes it large; the measurement noise uses it). silence_before_s: time from the previous
     block's last accepted sample to this block's first (a hole in the data: dropouts or
-    rejected samples). after_gap, time_reset: the block starts a new time line.
+    rejected samples). travel_before_rad: how far the motor turned in that silence (the
+    difference of the two samples' positions; NaN where there is no previous sample on the
+    time line). after_gap, time_reset: the block starts a new time line.
     accepted_so_far, rejected_so_far: the samples accepted and rejected from the start up to
     the block's last accepted sample, in input order (the same however the samples were
     chunked; rejected samples after it count in the next block).
@@ -135,6 +137,7 @@ class Block:
     current_residual_var_a2: float = 0.0
     motor_acceleration_var_rad2_s4: float = 0.0
     silence_before_s: float = 0.0
+    travel_before_rad: float = math.nan
     after_gap: bool = False
     time_reset: bool = False
     accepted_so_far: int = 0
@@ -166,6 +169,7 @@ def merge_blocks(blocks: list[Block]) -> Block:
             / weights.sum() ** 2
         ),
         silence_before_s=blocks[0].silence_before_s,
+        travel_before_rad=blocks[0].travel_before_rad,
         after_gap=blocks[0].after_gap,
         time_reset=blocks[0].time_reset,
         accepted_so_far=blocks[-1].accepted_so_far,
@@ -207,6 +211,7 @@ class SampleBlocker:
         self._anchor: float | None = None
         self._last_block_stamp: float | None = None
         self._last_sample_stamp: float | None = None  # the last accepted one in a block
+        self._last_sample_position = math.nan  # and its motor position
         self._last_processed_stamp = math.inf  # the last one of a block, rejected or not
         self._time_reset = False
         self._previous_current = math.nan  # last sample before the pending ones
@@ -526,6 +531,8 @@ class SampleBlocker:
         period = self._params.filter.block_duration_s
         first_stamps = run.stamp_s[starts]
         last_stamps = run.stamp_s[last]
+        first_positions = run.position_rad[starts]
+        last_positions = run.position_rad[last]
         blocks = []
         for b in range(len(starts)):
             previous = self._last_block_stamp
@@ -533,9 +540,10 @@ class SampleBlocker:
             duration = period
             if previous is not None and not reset:
                 duration = float(stamps[b]) - previous
-            silence = 0.0
+            silence, travel = 0.0, math.nan
             if self._last_sample_stamp is not None and not reset:
                 silence = float(first_stamps[b]) - self._last_sample_stamp
+                travel = abs(float(first_positions[b]) - self._last_sample_position)
             blocks.append(
                 Block(
                     stamp_s=float(stamps[b]),
@@ -550,6 +558,7 @@ class SampleBlocker:
                     current_residual_var_a2=float(residual_var[b]),
                     motor_acceleration_var_rad2_s4=float(slope_var[b]),
                     silence_before_s=silence,
+                    travel_before_rad=travel,
                     after_gap=bool(new_line[b]),
                     time_reset=reset,
                     accepted_so_far=int(so_far[0][last[b]]),
@@ -558,6 +567,7 @@ class SampleBlocker:
             )
             self._last_block_stamp = float(stamps[b])
             self._last_sample_stamp = float(last_stamps[b])
+            self._last_sample_position = float(last_positions[b])
             self._time_reset = False
         return blocks
 

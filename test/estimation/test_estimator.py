@@ -267,6 +267,22 @@ def test_a_sensor_clock_jumping_by_decades_is_a_gap_not_a_jam() -> None:
     assert float(np.sqrt(np.mean(error**2))) < 0.01 * rated
 
 
+def test_stamps_in_milliseconds_read_as_seconds_add_no_wear_of_their_own() -> None:
+    """Every sample a gap of a second: half a second of wear a sample, 500 times too much,
+    saved for good by a node (found by a review session). After a gap the wear follows the
+    motor's travel (its positions) instead."""
+    scene = scene_from_mapping(downhole(jams=[]))
+    motor = simulate(scene).motor
+    params = EstimatorParams(actuator=scene.actuator)
+    final_loss_m = []
+    for stamps in (motor.stamp_s, 1000.0 * motor.stamp_s):
+        estimator = HealthEstimator(params)
+        states = estimator.process(dataclasses.replace(motor, stamp_s=stamps))
+        states += estimator.finish()
+        final_loss_m.append(states[-1].precision_loss_m)
+    assert 0.0 < final_loss_m[1] < 1.5 * final_loss_m[0]
+
+
 def test_a_load_beyond_what_the_motor_can_drive_is_a_divergence() -> None:
     """A likeliest load of 200 times the rated load (seen with the UKF after a false count of
     three jammed rollers) is re-initialised whatever its NIS, and restarts from zero."""
