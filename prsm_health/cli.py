@@ -31,7 +31,7 @@ from prsm_health.bags.writer import working_directory
 from prsm_health.bench_command import add_bench_command
 from prsm_health.interrupt import EXIT_INTERRUPTED, removed_on_abort, stop_on_interrupt
 from prsm_health.node_params import add_node_params_command
-from prsm_health.physics.errors import PhysicsError
+from prsm_health.physics.errors import ParameterError, PhysicsError
 from prsm_health.physics.geometry import Misalignment
 from prsm_health.physics.load_distribution import LoadingCase
 from prsm_health.physics.model import ModelResult, OperatingPoint, evaluate
@@ -50,6 +50,24 @@ EXIT_BROKEN_PIPE = 141
 BAG_BYTES_PER_SAMPLE = 50
 RPM_TO_RAD_S = 2.0 * math.pi / 60.0
 M_PER_S_TO_UM_PER_H = 1e6 * 3600.0
+
+
+#: The option that sets each field of an operating point or scene, for errors that name the
+#: field: the user typed ``--axial-load -5``, not ``axial_load_n``.
+OPTION_OF_FIELD = {
+    "axial_load_n": "--axial-load",
+    "radial_load_n": "--radial-load",
+    "jammed_rollers": "--jammed",
+    "duration_s": "--duration",
+    "rate_hz": "--rate",
+    "seed": "--seed",
+}
+
+
+def _by_option(exc: ParameterError) -> ParameterError:
+    """``exc`` naming the command-line option of its field, where there is one."""
+    option = OPTION_OF_FIELD.get(exc.field)
+    return exc if option is None else ParameterError(option, exc.message)
 
 
 class _Parser(argparse.ArgumentParser):
@@ -227,7 +245,10 @@ def _run_model(args: argparse.Namespace) -> int:
         preset = dataclasses.replace(
             preset, wear=dataclasses.replace(preset.wear, model=args.wear_model)
         )
-    result = evaluate(preset, _point(args))
+    try:
+        result = evaluate(preset, _point(args))
+    except ParameterError as exc:
+        raise _by_option(exc) from exc
     if args.json:
         echoed = {
             k: v for k, v in vars(args).items() if k not in ("command", "handler", "json", "preset")
@@ -308,7 +329,10 @@ def _run_simulate(args: argparse.Namespace) -> int:
     }
     if args.rate is not None and args.rate > 0.0:
         overrides["truth_rate_hz"] = args.rate / math.ceil(args.rate / scene.truth_rate_hz)
-    scene = dataclasses.replace(scene, **{k: v for k, v in overrides.items() if v is not None})
+    try:
+        scene = dataclasses.replace(scene, **{k: v for k, v in overrides.items() if v is not None})
+    except ParameterError as exc:
+        raise _by_option(exc) from exc
     _check_room(scene.samples, joint_states=scene.joint_states, out=args.out)
     if late := [f"{jam.time_s:g} s" for jam in scene.jams if jam.time_s >= scene.duration_s]:
         print(

@@ -97,6 +97,27 @@ def test_invalid_arguments_give_one_line_and_exit_2(
     assert err.startswith("prsm-health")
 
 
+@pytest.mark.parametrize(
+    ("argv", "error"),
+    [
+        (["model", "--axial-load", "-5"], "--axial-load: must be >= 0"),
+        (["model", "--axial-load", "100", "--jammed", "11"], "--jammed: must be <= n_rollers"),
+        (["simulate", "--duration", "0"], "--duration: must be > 0, got 0.0"),
+        (["simulate", "--seed", "-1"], "--seed: must be an integer in [0, "),
+    ],
+)
+def test_a_value_out_of_range_names_its_option(
+    capsys: pytest.CaptureFixture[str], tmp_path: Path, argv: list[str], error: str
+) -> None:
+    """Not the field behind it (axial_load_n, duration_s: found by a review session)."""
+    preset = ["--preset", "dong2022-downhole"] if argv[0] == "model" else []
+    scene = ["--scene", "nominal-downhole", "--out", str(tmp_path / "bag")]
+    assert main([*argv, *(preset if argv[0] == "model" else scene)]) == 2
+    err = capsys.readouterr().err
+    assert err.startswith(f"prsm-health: error: {error}") and err.count("\n") == 1
+    assert not (tmp_path / "bag").exists()
+
+
 def test_a_reader_that_left_ends_the_output_quietly() -> None:
     """``prsm-health model-demo | head -1``, with the reader gone before the first write (a
     pipe whose read end is closed): exit 141 and no traceback."""
