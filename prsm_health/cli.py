@@ -111,7 +111,9 @@ def _build_parser() -> _Parser:
         metavar="RPM",
         help="screw speed [rpm] (default 300)",
     )
-    model.add_argument("--jammed", type=int, default=0, metavar="K", help="jammed rollers")
+    model.add_argument(
+        "--jammed", type=int, default=0, metavar="K", help="jammed rollers (default 0)"
+    )
     model.add_argument(
         "--misalignment-arcmin",
         type=_finite,
@@ -224,7 +226,7 @@ def _table(preset_name: str, result: ModelResult) -> str:
         f"  friction torque          {float(result.friction.total_nm):10.4f} N m",
         f"  efficiency               {result.efficiency:10.4f}",
         f"  precision-loss rate      {loss_rate_um_per_h:10.3g} um/h",
-        f"  fatigue life             {result.fatigue_life_h:10.4g} h",
+        f"  fatigue life             {_life(result.fatigue_life_h)}",
         f"  peak contact force       {loads.screw_roller_n.max():10.1f} N (screw-roller), "
         f"{loads.roller_nut_n.max():.1f} N (roller-nut)",
         "  roller  axial load [N]  screw-roller force, thread 1 .. last [N]",
@@ -237,6 +239,11 @@ def _table(preset_name: str, result: ModelResult) -> str:
             f"(min {forces.min():.1f}, max {forces.max():.1f})"
         )
     return "\n".join(lines)
+
+
+def _life(hours: float) -> str:
+    """A fatigue life for the table: none at standstill, where nothing rolls over."""
+    return f"{hours:10.4g} h" if math.isfinite(hours) else "         - (no rotation)"
 
 
 def _run_model(args: argparse.Namespace) -> int:
@@ -254,6 +261,7 @@ def _run_model(args: argparse.Namespace) -> int:
             k: v for k, v in vars(args).items() if k not in ("command", "handler", "json", "preset")
         }
         echoed["misalignment_arcmin"] = list(args.misalignment_arcmin)
+        echoed["wear_model"] = preset.wear.model  # the law used, the preset's unless given
         print(json.dumps(result_to_json(preset.name, echoed, result)))
     else:
         print(_table(preset.name, result))

@@ -50,6 +50,7 @@ def test_model_json_has_the_documented_fields(capsys: pytest.CaptureFixture[str]
     assert doc["fatigue_life_h"] > 0.0
     assert doc["inputs"]["axial_load"] == 50000.0
     assert doc["inputs"]["misalignment_arcmin"] == [1.0, 0.0]
+    assert doc["inputs"]["wear_model"] == "archard"  # the preset's law (it echoed null)
     # Misalignment makes clearances differ along the roller (004 Fig. 8).
     clearances = doc["axial_clearance_mm"][0]
     assert max(clearances) - min(clearances) > 1e-3
