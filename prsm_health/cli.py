@@ -342,18 +342,18 @@ def _run_simulate(args: argparse.Namespace) -> int:
     except ParameterError as exc:
         raise _by_option(exc) from exc
     _check_room(scene.samples, joint_states=scene.joint_states, out=args.out)
-    if late := [f"{jam.time_s:g} s" for jam in scene.jams if jam.time_s >= scene.duration_s]:
-        print(
-            f"note: the jam(s) at {', '.join(late)} come after the end of the run "
-            f"({scene.duration_s:g} s): not simulated",
-            file=sys.stderr,
-        )
     if args.out.exists() or args.out.is_symlink():
         if not args.force:
             raise ValueError(f"{args.out} exists (use --force to replace a bag)")
         _remove_bag(args.out)
     if args.force:
         _remove_killed_write(args.out)
+    if late := [f"{jam.time_s:g} s" for jam in scene.jams if jam.time_s >= scene.duration_s]:
+        print(
+            f"note: the jam(s) at {', '.join(late)} come after the end of the run "
+            f"({scene.duration_s:g} s): not simulated",
+            file=sys.stderr,
+        )
     simulator = Simulator(scene, exact=True if args.exact else None)
     with (
         stop_on_interrupt() as stop,
