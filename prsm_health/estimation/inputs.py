@@ -117,9 +117,10 @@ class Block:
     its straight-line trend in the block (a step inside the block, e.g. the onset of a jam,
     makes it large; the measurement noise uses it). silence_before_s: time from the previous
     block's last accepted sample to this block's first (a hole in the data: dropouts or
-    rejected samples). travel_before_rad: how far the motor turned in that silence (the
-    difference of the two samples' positions; NaN where there is no previous sample on the
-    time line). after_gap, time_reset: the block starts a new time line.
+    rejected samples). travel_rad: how far the motor turned from the previous block's last
+    accepted sample to this block's last (the difference of their positions; NaN where there
+    is no previous sample on the time line). after_gap, time_reset: the block starts a new
+    time line.
     accepted_so_far, rejected_so_far: the samples accepted and rejected from the start up to
     the block's last accepted sample, in input order (the same however the samples were
     chunked; rejected samples after it count in the next block).
@@ -137,7 +138,7 @@ class Block:
     current_residual_var_a2: float = 0.0
     motor_acceleration_var_rad2_s4: float = 0.0
     silence_before_s: float = 0.0
-    travel_before_rad: float = math.nan
+    travel_rad: float = math.nan
     after_gap: bool = False
     time_reset: bool = False
     accepted_so_far: int = 0
@@ -169,7 +170,7 @@ def merge_blocks(blocks: list[Block]) -> Block:
             / weights.sum() ** 2
         ),
         silence_before_s=blocks[0].silence_before_s,
-        travel_before_rad=blocks[0].travel_before_rad,
+        travel_rad=sum(b.travel_rad for b in blocks),
         after_gap=blocks[0].after_gap,
         time_reset=blocks[0].time_reset,
         accepted_so_far=blocks[-1].accepted_so_far,
@@ -531,7 +532,6 @@ class SampleBlocker:
         period = self._params.filter.block_duration_s
         first_stamps = run.stamp_s[starts]
         last_stamps = run.stamp_s[last]
-        first_positions = run.position_rad[starts]
         last_positions = run.position_rad[last]
         blocks = []
         for b in range(len(starts)):
@@ -543,7 +543,7 @@ class SampleBlocker:
             silence, travel = 0.0, math.nan
             if self._last_sample_stamp is not None and not reset:
                 silence = float(first_stamps[b]) - self._last_sample_stamp
-                travel = abs(float(first_positions[b]) - self._last_sample_position)
+                travel = abs(float(last_positions[b]) - self._last_sample_position)
             blocks.append(
                 Block(
                     stamp_s=float(stamps[b]),
@@ -558,7 +558,7 @@ class SampleBlocker:
                     current_residual_var_a2=float(residual_var[b]),
                     motor_acceleration_var_rad2_s4=float(slope_var[b]),
                     silence_before_s=silence,
-                    travel_before_rad=travel,
+                    travel_rad=travel,
                     after_gap=bool(new_line[b]),
                     time_reset=reset,
                     accepted_so_far=int(so_far[0][last[b]]),

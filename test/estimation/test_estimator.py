@@ -267,11 +267,13 @@ def test_a_sensor_clock_jumping_by_decades_is_a_gap_not_a_jam() -> None:
     assert float(np.sqrt(np.mean(error**2))) < 0.01 * rated
 
 
-def test_stamps_in_milliseconds_read_as_seconds_add_no_wear_of_their_own() -> None:
-    """Every sample a gap of a second: half a second of wear a sample, 500 times too much,
-    saved for good by a node (found by a review session). After a gap the wear follows the
-    motor's travel (its positions) instead."""
-    scene = scene_from_mapping(downhole(jams=[]))
+@pytest.mark.parametrize("rate_hz", [1000.0, 4000.0])
+def test_stamps_in_milliseconds_read_as_seconds_add_no_wear_of_their_own(rate_hz: float) -> None:
+    """Every sample a gap of a second at 1 kHz, a hole of a quarter at 4 kHz: that much wear
+    a sample, 500 to 1,000 times too much, saved for good by a node (found by two review
+    sessions). The wear follows the motor's travel (its positions) where they say it turned
+    for less than half the stamps' time."""
+    scene = scene_from_mapping(downhole(jams=[], duration_s=12.0, rate_hz=rate_hz))
     motor = simulate(scene).motor
     params = EstimatorParams(actuator=scene.actuator)
     final_loss_m = []
