@@ -228,20 +228,25 @@ def _replay_into_outputs(
             else None
         ),
     )
-    with (
-        tqdm(unit="sample", unit_scale=True, disable=None, file=sys.stderr) as bar,
-        stop_on_interrupt() as stop,
-        removed_on_abort(args.out),
-    ):
-        result = replay(
-            args.bag,
-            params,
-            topics=topics,
-            out=args.out,
-            progress=bar.update,
-            hardware_id=args.hardware_id,
-            stop=stop,
-        )
+    try:
+        with (
+            tqdm(unit="sample", unit_scale=True, disable=None, file=sys.stderr) as bar,
+            stop_on_interrupt() as stop,
+            removed_on_abort(args.out),
+        ):
+            result = replay(
+                args.bag,
+                params,
+                topics=topics,
+                out=args.out,
+                progress=bar.update,
+                hardware_id=args.hardware_id,
+                stop=stop,
+            )
+    except ValueError as exc:  # found in the bag after the output was begun (BagError)
+        if args.out is not None and remove_output(args.out):  # else it blocks the rerun
+            raise ValueError(f"{exc} (the output bag {args.out} is not kept)") from exc
+        raise
     if not result.counters.accepted:
         print(summary(args.bag, source, result))
         why = f"no sample of {args.bag} accepted: {_rejected_why(args.bag, topics, result)}"

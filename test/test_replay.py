@@ -27,7 +27,7 @@ from prsm_health.bags import MOTOR_STATE, InputTopics, read_motor_samples, read_
 from prsm_health.bags.bagfiles import custom_data
 from prsm_health.bags.topics import DIAGNOSTICS_TOPIC, HEALTH_TOPIC, TRUTH_TOPIC
 from prsm_health.bags.typestore import typestore
-from prsm_health.bags.writer import BagWriter, write_motor_states, write_truth
+from prsm_health.bags.writer import BagWriter, write_joint_states, write_motor_states, write_truth
 from prsm_health.cli import main
 from prsm_health.estimation.estimate import EstimateEvent
 from prsm_health.estimation.params import EstimatorParams
@@ -38,6 +38,7 @@ from prsm_health.scenes.recording import record
 from prsm_health.scenes.scene import load_scene, scene_from_mapping
 from prsm_health.scenes.simulator import Simulator
 from prsm_health.signals import MotorSamples
+from test.bags.samples import motor_samples, split_bag, write_bag
 
 BUNDLED_BAGS = Path(__file__).resolve().parents[1] / "bags"
 
@@ -427,6 +428,22 @@ def test_cli_says_when_no_sample_matches_the_joint_name_and_what_is_skipped(
     assert main(["replay", str(no_truth), "--metrics-json", str(metrics)]) == 0
     assert "--metrics-json: not written" in capsys.readouterr().out
     assert not metrics.exists()
+
+
+def test_a_bag_refused_in_the_middle_leaves_no_output_bag(
+    tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    """Its second file carries /motor_state as JointState: found after the output bag was
+    begun, which stayed and blocked the rerun (found by a review session)."""
+    first = write_bag(tmp_path / "a", motor=motor_samples(30_000, faults=False))
+    with BagWriter(tmp_path / "b") as writer:
+        write_joint_states(writer, motor_samples(3000, t0=30.0, faults=False), topic="/motor_state")
+    split = split_bag(tmp_path / "split", [first, tmp_path / "b"])
+    out = tmp_path / "out"
+    assert main(["replay", str(split), "--out", str(out)]) == 2
+    err = capsys.readouterr().err
+    assert "topic /motor_state has two types" in err
+    assert f"(the output bag {out} is not kept)" in err and not out.exists()
 
 
 def test_cli_ends_with_an_error_when_the_input_topic_is_empty(
