@@ -331,7 +331,9 @@ def _read_summary(found: _File, data_end: int) -> None:
             start_ns, _, offset = _CHUNK_INDEX_START.unpack_from(data, body)
             indexed.append((int(start_ns), int(offset)))
         pos = end
-    found.summary_channels = channels
+    # A summary without Channel records (the mcap writer's repeat_channels=False) declares
+    # nothing: the topics come from the data section (they read as "none").
+    found.summary_channels = channels or None
     held = {s.offset for s in found.segments if s.chunk}
     if missing := sorted((t, offset) for t, offset in indexed if offset not in held):
         first_ns, offset = missing[0]

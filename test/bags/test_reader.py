@@ -149,13 +149,20 @@ def test_log_time_order_across_overlapping_chunks(tmp_path: Path) -> None:
 
 
 @pytest.mark.parametrize(
-    ("compression", "chunked"),
-    [(CompressionType.LZ4, True), (CompressionType.NONE, True), (CompressionType.NONE, False)],
+    ("compression", "chunked", "summary_channels"),
+    [
+        (CompressionType.LZ4, True, True),
+        (CompressionType.NONE, True, True),
+        (CompressionType.NONE, False, True),
+        (CompressionType.NONE, True, False),
+    ],
 )
 def test_foreign_mcap_files_lz4_uncompressed_unchunked(
-    tmp_path: Path, compression: CompressionType, chunked: bool
+    tmp_path: Path, compression: CompressionType, chunked: bool, summary_channels: bool
 ) -> None:
-    """MCAP written by the mcap library (CRCs on): lz4 chunks, plain chunks, no chunks."""
+    """MCAP written by the mcap library (CRCs on): lz4 chunks, plain chunks, no chunks, a
+    summary without Channel records (refused as 'no topic /motor_state; topics: none' until
+    a review session found it: such a summary declares nothing)."""
     motor = motor_samples(5000)
     sec, nanosec = seconds_to_stamps(motor.stamp_s)
     payloads = encode_motor_states(
@@ -172,7 +179,12 @@ def test_foreign_mcap_files_lz4_uncompressed_unchunked(
     msgdef, _ = typestore().generate_msgdef(MOTOR_STATE, ros_version=2)
     with path.open("wb") as stream:
         writer = McapWriter(
-            stream, chunk_size=50_000, compression=compression, use_chunking=chunked
+            stream,
+            chunk_size=50_000,
+            compression=compression,
+            use_chunking=chunked,
+            repeat_channels=summary_channels,
+            repeat_schemas=summary_channels,
         )
         writer.start(profile="ros2", library="test")
         schema = writer.register_schema(MOTOR_STATE, "ros2msg", msgdef.encode())
