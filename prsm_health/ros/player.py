@@ -366,6 +366,11 @@ def _one_pass(
             delay = target - time.monotonic()
         if clock is not None:
             clock.tick(log_time_ns)
+        if topic not in publishers:  # counted 0 by the metadata rosbags read: not the bag's
+            raise PlayError(
+                f"{topic}: the bag's metadata counts no message on it, yet it holds some: "
+                "its metadata.yaml disagrees with its files"
+            )
         try:
             if not _publish_held_back(publishers[topic], bytes(raw), stop):
                 return

@@ -15,6 +15,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 import rclpy
+import yaml
 from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus
 from mcap.reader import make_reader
 from prsm_health_msgs.msg import GroundTruth, HealthEstimate, MotorState
@@ -73,6 +74,18 @@ def test_play_refuses_what_it_cannot_play(tmp_path: Path) -> None:
     looped = cli("play", str(empty), "--loop", timeout_s=30.0)  # it spun at 100 % CPU
     assert looped.returncode == 2
     assert "nothing to loop: the bag has no messages on the topics to play" in looped.stderr
+    # metadata.yaml counts none on /motor_state, the file holds them: it ended in a KeyError
+    # traceback (found by a review session); one line now.
+    uncounted = simulated_bag(tmp_path / "uncounted", short_jam_scene(0.5))
+    metadata = uncounted / "metadata.yaml"
+    info = yaml.safe_load(metadata.read_text())
+    for entry in info["rosbag2_bagfile_information"]["topics_with_message_count"]:
+        if entry["topic_metadata"]["name"] == "/motor_state":
+            entry["message_count"] = 0
+    metadata.write_text(yaml.safe_dump(info))
+    played = cli("play", str(uncounted), "--rate", "100")
+    assert played.returncode == 1 and "Traceback" not in played.stderr
+    assert "/motor_state: the bag's metadata counts no message on it" in played.stderr
 
 
 def test_play_refuses_rates_out_of_range(tmp_path: Path) -> None:
