@@ -96,12 +96,27 @@ class HealthEstimator:
         state and ripple, a new roller's ripple prior each; :meth:`JamHypotheses.assume_onset`).
 
         Raises:
-            ValueError: fewer jammed rollers than the likeliest hypothesis has, or more than
-                the preset's rollers (nothing is changed then but the pending estimates).
+            ValueError: not an integer within 0..N (nothing is changed then); fewer jammed
+                rollers than the likeliest hypothesis has (nothing is changed then but the
+                pending estimates).
         """
+        self._check_count(jammed_rollers)
         before = self.finish(end_of_data=False)
-        self._bank.assume_onset(jammed_rollers)
+        self._bank.assume_onset(int(jammed_rollers))
         return before
+
+    def _check_count(self, jammed_rollers: object) -> None:
+        """Refuse a jammed-roller count that is not an integer within 0..N (N: the preset's
+        rollers): a bool or a float passed, and a bool indexed every hypothesis at once."""
+        rollers = self._bank.n_rollers
+        whole = isinstance(jammed_rollers, int | np.integer) and not isinstance(
+            jammed_rollers, bool
+        )
+        if not (whole and 0 <= jammed_rollers <= rollers):  # type: ignore[operator]
+            raise ValueError(
+                f"jammed_rollers: must be an integer within 0..{rollers} (the rollers of "
+                f"{self.params.actuator.preset.name}), got {jammed_rollers!r}"
+            )
 
     # --- persistence --------------------------------------------------------------------
     def snapshot(self) -> dict[str, Any]:
@@ -195,15 +210,7 @@ class HealthEstimator:
                 rollers), or a flag not a bool (the string "no" is true, and would reset what
                 was kept); nothing is done then.
         """
-        rollers = self._bank.n_rollers
-        whole = isinstance(jammed_rollers, int | np.integer) and not isinstance(
-            jammed_rollers, bool
-        )
-        if not (whole and 0 <= jammed_rollers <= rollers):
-            raise ValueError(
-                f"jammed_rollers: must be an integer within 0..{rollers} (the rollers of "
-                f"{self.params.actuator.preset.name}), got {jammed_rollers!r}"
-            )
+        self._check_count(jammed_rollers)
         flags = {
             "reset_precision_loss": reset_precision_loss,
             "reset_fatigue_damage": reset_fatigue_damage,

@@ -412,6 +412,10 @@ def test_maintenance_resets_the_count_and_only_what_was_replaced() -> None:
                 reset_precision_loss=True,
                 reset_fatigue_damage=True,
             )
+        # The evidence's count as well: True spread the probabilities over every count, 2.5
+        # raised an IndexError at the next block (found by a review session).
+        with pytest.raises(ValueError, match=expected):
+            other.assume_jam_onset(bad)  # type: ignore[arg-type]
 
     pending = estimator.reset_after_maintenance(
         0, reset_precision_loss=True, reset_fatigue_damage=False
