@@ -25,13 +25,14 @@ import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
 from prsm_health.config import build_dataclass, build_each
-from prsm_health.physics.errors import ParameterError
+from prsm_health.physics.errors import DomainError, ParameterError
 from prsm_health.physics.geometry import (
     Misalignment,
     require_ranges,
     require_real,
 )
 from prsm_health.physics.load_distribution import LoadingCase
+from prsm_health.physics.meshing import meshing
 from prsm_health.physics.presets import PRESET_NAMES, Preset, load_preset
 
 FloatArray = NDArray[np.float64]
@@ -155,6 +156,7 @@ class Actuator:
 
     def __post_init__(self) -> None:
         require_ranges(self, "actuator", {"wear_acceleration": WEAR_ACCELERATION_RANGE})
+        _check_flanks_stay_apart(self.preset, self.misalignment)
 
     def loading_case(self, motor_speed_rad_s: float) -> LoadingCase:
         """The loading case for the motor's direction of rotation (forward at standstill)."""
@@ -188,6 +190,33 @@ def _misalignment(tilt: object) -> Misalignment:
         return Misalignment.from_arcmin(x, y)
     except ParameterError as exc:  # beyond the small-angle limit
         raise ParameterError(name, f"{tilt!r} arc minutes: {exc}") from exc
+
+
+#: Carrier angles per roller spacing at which a misalignment's clearances are checked (the
+#: clearances are periodic in it and smooth: first-order in the tilt, 004 eq. 2-4).
+MISALIGNMENT_CHECK_ANGLES = 64
+
+
+def _check_flanks_stay_apart(preset: Preset, misalignment: Misalignment) -> None:
+    """Refuse a misalignment that closes a screw-roller clearance at some carrier angle
+    (:func:`~prsm_health.physics.meshing.meshing`): accepted, it raised a DomainError when
+    the estimator or the simulator was built, not as a bad parameter (found by a review
+    session; from 3 arc minutes on meng2022-misalignment and meng2021-fractal)."""
+    if misalignment.is_aligned:
+        return
+    spacing = 2.0 * math.pi / preset.geometry.n_rollers
+    for angle in np.linspace(0.0, spacing, MISALIGNMENT_CHECK_ANGLES, endpoint=False):
+        try:
+            meshing(preset.geometry, misalignment, carrier_angle_rad=float(angle))
+        except DomainError as exc:
+            tilt = [
+                round(math.degrees(t) * 60.0, 6)
+                for t in (misalignment.tilt_x_rad, misalignment.tilt_y_rad)
+            ]
+            raise ParameterError(
+                "actuator.misalignment_arcmin",
+                f"{tilt} arc minutes is more than {preset.name}'s clearances allow: {exc}",
+            ) from exc
 
 
 def actuator_from_mapping(data: object) -> Actuator:

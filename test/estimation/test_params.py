@@ -212,6 +212,20 @@ def test_a_misalignment_beyond_the_small_angle_limit_names_the_key_in_arc_minute
         params_from_mapping(document)
 
 
+def test_a_misalignment_that_closes_the_flanks_is_a_bad_parameter() -> None:
+    """3 arc minutes on paper 004's screw: accepted, then a DomainError when the estimator
+    was built (found by a review session). 1 arc minute stays fine."""
+    tilted = {"preset": "meng2022-misalignment", "misalignment_arcmin": [3.0, 0.0]}
+    with pytest.raises(
+        ParameterError,
+        match=r"^actuator\.misalignment_arcmin: \[3\.0, 0\.0\] arc minutes is more than "
+        r"meng2022-misalignment's clearances allow: .* the flanks would overlap",
+    ):
+        params_from_mapping({"actuator": tilted})
+    tilted["misalignment_arcmin"] = [1.0, 0.0]
+    HealthEstimator(params_from_mapping({"actuator": tilted}))
+
+
 @pytest.mark.parametrize(
     ("section", "key"), [("model", "initial_jammed_rollers"), ("filter", "components_per_count")]
 )
