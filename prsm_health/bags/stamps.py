@@ -76,7 +76,10 @@ def seconds_to_stamps(stamp_s: ArrayLike) -> tuple[Int32Array, UInt32Array]:
 
 
 def stamps_to_seconds(sec: ArrayLike, nanosec: ArrayLike) -> FloatArray:
-    """``(sec, nanosec)`` -> float seconds; the non-finite markers become NaN / +inf / -inf."""
+    """``(sec, nanosec)`` -> float seconds; the non-finite markers become NaN / +inf / -inf,
+    and any other ``nanosec`` of a second or more NaN (invalid, as the node reads it:
+    :func:`prsm_health.ros.messages.stamp_seconds`; the replay took (s - 1, 1e9 + ns) for
+    s + ns and accepted samples the node rejected)."""
     s = np.asarray(sec, dtype=np.int64)
     ns = np.asarray(nanosec, dtype=np.int64)
     total = s * NS_PER_S + ns  # |total| < 2**62: no overflow
@@ -87,11 +90,12 @@ def stamps_to_seconds(sec: ArrayLike, nanosec: ArrayLike) -> FloatArray:
         total.astype(np.float64) / NS_PER_S,
         s.astype(np.float64) + ns.astype(np.float64) / NS_PER_S,
     )
-    marker = ns == NONFINITE_NANOSEC
-    if not marker.any():
+    invalid = ns >= NS_PER_S
+    if not invalid.any():
         return seconds
-    special = np.where(s > 0, np.inf, np.where(s < 0, -np.inf, np.nan))
-    return np.where(marker, special, seconds)
+    marker = ns == NONFINITE_NANOSEC
+    special = np.where(marker & (s > 0), np.inf, np.where(marker & (s < 0), -np.inf, np.nan))
+    return np.where(invalid, special, seconds)
 
 
 def log_times_from_stamps(stamp_s: ArrayLike) -> UInt64Array:

@@ -24,6 +24,16 @@ def test_non_finite_stamps_survive_as_markers() -> None:
     np.testing.assert_array_equal(back, [np.nan, np.inf, -np.inf, 1.5])
 
 
+def test_a_nanosec_of_a_second_or_more_is_invalid_as_the_node_reads_it() -> None:
+    """(sec - 1, nanosec + 1e9) was read as sec + nanosec and accepted, where the node's
+    stamp_seconds rejects it (found by a review session); the markers stay markers."""
+    back = stamps_to_seconds([4, 4, 3, -5], [1_000_000_000, 4_000_000_000, 999_999_999, 7])
+    np.testing.assert_array_equal(back, [np.nan, np.nan, 3.999999999, -4.999999993])
+    np.testing.assert_array_equal(
+        stamps_to_seconds([5, -5, 0], [NONFINITE_NANOSEC] * 3), [np.inf, -np.inf, np.nan]
+    )
+
+
 def test_negative_stamps_and_rounding_carry() -> None:
     sec, nanosec = seconds_to_stamps([-3.25, 2.9999999999, -1e-10])
     assert sec.tolist() == [-4, 3, 0]
