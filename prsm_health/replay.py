@@ -188,7 +188,9 @@ def replay(
 
 def _truth(bag: Path, damage: list[BagError]) -> TruthSamples | None:
     """The bag's truth, or None; a damaged truth topic gives what was read before it, and so
-    does a truth sample with a non-finite value (the bag is damaged there as well)."""
+    does a truth sample with a non-finite value or a stamp that does not advance (the bag is
+    damaged there as well: the metrics look the truth up by its stamps, and stamps that went
+    back 2 s scored a load RMSE of 17.7 % for 0.8 %, found by a review session)."""
     try:
         truth, error = read_truth(bag, partial_ok=True)
     except BagError:
@@ -202,6 +204,18 @@ def _truth(bag: Path, damage: list[BagError]) -> TruthSamples | None:
         first = int(np.argmin(finite))
         if not damage:
             damage.append(BagError(bag, f"{TRUTH_TOPIC}: message {first} holds a non-finite value"))
+        truth = truth[:first]  # scored up to it
+    advancing = np.diff(truth.stamp_s) > 0.0
+    if not advancing.all():
+        first = int(np.argmin(advancing)) + 1
+        if not damage:
+            damage.append(
+                BagError(
+                    bag,
+                    f"{TRUTH_TOPIC}: message {first} is stamped {truth.stamp_s[first]:.9g} s, "
+                    f"not after the one before it ({truth.stamp_s[first - 1]:.9g} s)",
+                )
+            )
         truth = truth[:first]  # scored up to it
     return truth
 

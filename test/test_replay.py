@@ -515,6 +515,27 @@ def test_a_truth_with_a_non_finite_value_is_scored_up_to_it(
     assert "DAMAGED" in out and "estimates lie outside the truth's span\n" in out
 
 
+def test_a_truth_whose_stamps_go_back_is_scored_up_to_them(bag: Path, tmp_path: Path) -> None:
+    """Truth stamps that went back 2 s were looked up as they came: a load RMSE of 17.7 %
+    where the right truth gives 0.8 %, exit 0 (found by a review session)."""
+    truth = read_truth(bag)
+    stamps = truth.stamp_s.copy()
+    stamps[600:] -= 2.0
+    broken = tmp_path / "truth-back"
+    with BagWriter(broken) as writer:
+        write_motor_states(writer, read_motor_samples(bag, InputTopics()))
+        write_truth(writer, dataclasses.replace(truth, stamp_s=stamps))
+    result = replay(broken, params())
+    assert result.damage is not None
+    assert f"message 600 is stamped {stamps[600]:.9g} s, not after the one before it" in str(
+        result.damage
+    )
+    assert result.truth is not None and len(result.truth) == 600
+    intact = replay(bag, params())
+    assert result.metrics is not None and intact.metrics is not None
+    assert result.metrics.load_rmse_n < 2.0 * intact.metrics.load_rmse_n
+
+
 def test_metrics_that_cannot_be_computed_are_null_in_the_json(
     tmp_path: Path, capsys: pytest.CaptureFixture[str]
 ) -> None:
