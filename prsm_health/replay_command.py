@@ -336,7 +336,8 @@ def _partial(result: ReplayResult) -> str:
 
 def _rejected_why(bag: Path, topics: InputTopics, result: ReplayResult) -> str:
     """The rejections by reason, and with JointState inputs the joints the bag names (a
-    JointState without the joint, or naming it twice, gives a non-finite sample)."""
+    JointState without the joint, naming it twice, or with an effort, velocity or position
+    array too short for it, gives a non-finite sample)."""
     if not result.samples:
         return f"no message on {topics.joint_states or topics.motor_state}"
     counts = result.counters.rejected
@@ -346,8 +347,9 @@ def _rejected_why(bag: Path, topics: InputTopics, result: ReplayResult) -> str:
     names = ", ".join(map(repr, joint_names(bag, topics.joint_states))) or "no joint"
     return (
         f"rejected as {why}; JointState messages on {topics.joint_states} without joint "
-        f"{topics.joint_name!r} (--joint-name), or naming it twice, give non-finite samples, "
-        f"and the first message names {names}"
+        f"{topics.joint_name!r} (--joint-name), naming it twice, or with an effort, velocity "
+        f"or position array too short for it give non-finite samples, and the first message "
+        f"names {names}"
     )
 
 
