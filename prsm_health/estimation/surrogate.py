@@ -185,8 +185,24 @@ class DirectPhysics:
     case: LoadingCase
 
     def evaluate(self, axial_load_n: float) -> tuple[FloatArray, FloatArray]:
-        """Values and d/dF at the load magnitude |F| (scalar), from the physics core."""
+        """Values and d/dF at the load magnitude |F| (scalar), from the physics core; beyond
+        the surrogate's largest load (TABLE_MAX_FRACTION of the preset's largest) extended as
+        a power law with the slope there, as the tables extend theirs (the physics core
+        refuses contact forces beyond its fractal table: a load a filter tried far out, a UKF
+        sigma point, raised a DomainError; found by a review session)."""
         load = abs(axial_load_n)
+        edge = TABLE_MAX_FRACTION * self.preset.largest_axial_load_n
+        if load <= edge:
+            return self._physics(load)
+        at_edge, slope_at_edge = self._physics(edge)
+        log_slope = np.divide(
+            slope_at_edge * edge, at_edge, out=np.zeros_like(at_edge), where=at_edge > 0.0
+        )
+        value = at_edge * (load / edge) ** log_slope
+        return value, value * log_slope / load
+
+    def _physics(self, load: float) -> tuple[FloatArray, FloatArray]:
+        """Values and d/dF at ``load`` >= 0 from the physics core (forward difference)."""
         step = max(load, NEGLIGIBLE_LOAD_N) * _DIFFERENCE_STEP
         averages = physics_averages(
             self.preset,

@@ -59,6 +59,20 @@ def test_direct_physics_equals_the_averages_it_samples() -> None:
     np.testing.assert_allclose(direct.evaluate(20e3)[0], reference, rtol=1e-12)
 
 
+def test_direct_physics_beyond_the_tables_extends_as_they_do() -> None:
+    """200 times the largest load (a UKF sigma point far out): the physics core refuses such
+    contact forces and the naive reference raised a DomainError (found by a review session).
+    Beyond the tables' last load both extend a power law from there (the tables with their
+    last interval's slope, the physics with its slope at that load: 1.4 % apart here)."""
+    preset = load_preset("dong2022-downhole")
+    args = (preset, Misalignment(), 0.0, LoadingCase.SCREW_TENSION_NUT_COMPRESSION)
+    direct, tables = DirectPhysics(*args), averaged_tables(*args)
+    far = 200.0 * preset.largest_axial_load_n
+    value, slope = direct.evaluate(far)
+    assert np.isfinite(value).all() and np.isfinite(slope).all() and value.any()
+    np.testing.assert_allclose(value, tables.evaluate(far)[0], rtol=0.02)
+
+
 def test_a_jammed_roller_slides_with_many_times_the_rolling_torque() -> None:
     """Paper 002: r = jammed / rolling torque of one roller is far above 1 (60-90 here)."""
     averages = physics_averages(load_preset("li2020-jamming"), [15e3])
