@@ -35,6 +35,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from prsm_health.bags.errors import BagDamagedError, BagError
+from prsm_health.bags.schemas import expected_fields, schema_fields
 
 if sys.version_info >= (3, 14):  # pragma: no cover
     from compression import zstd
@@ -111,12 +112,15 @@ class _MismatchError(Exception):
 
 @dataclass(frozen=True)
 class ChannelInfo:
-    """An MCAP channel: topic, message type (its schema name) and message encoding."""
+    """An MCAP channel: topic, message type (its schema name) and message encoding; the
+    fields its ros2msg schema defines (:func:`~prsm_health.bags.schemas.schema_fields`;
+    None: another schema encoding, or none)."""
 
     id: int
     topic: str
     msgtype: str
     encoding: str
+    fields: tuple[str, ...] | None = None
 
 
 @dataclass(frozen=True)
@@ -195,7 +199,7 @@ class _File:
 
     path: Path
     data: mmap.mmap | bytes = b""
-    schemas: dict[int, str] = field(default_factory=dict)
+    schemas: dict[int, tuple[str, tuple[str, ...] | None]] = field(default_factory=dict)
     channels: dict[int, ChannelInfo] = field(default_factory=dict)
     summary_channels: dict[int, ChannelInfo] | None = None
     segments: list[_Segment] = field(default_factory=list)
@@ -206,11 +210,14 @@ class _File:
         rec = _Reader(data, body, end)
         if op == OP_SCHEMA:
             schema_id = rec.u16()
-            self.schemas[schema_id] = rec.string()
+            name, schema_encoding = rec.string(), rec.string()
+            fields = schema_fields(rec.string()) if schema_encoding == "ros2msg" else None
+            self.schemas[schema_id] = (name, fields)
             return None
         channel_id, schema_id = rec.u16(), rec.u16()
         topic, encoding = rec.string(), rec.string()
-        channel = ChannelInfo(channel_id, topic, self.schemas.get(schema_id, ""), encoding)
+        name, fields = self.schemas.get(schema_id, ("", None))
+        channel = ChannelInfo(channel_id, topic, name, encoding, fields)
         self.channels[channel_id] = channel
         return channel
 
@@ -466,6 +473,13 @@ class BagScanner:
         if self.seen[topic] != channel.msgtype:
             raise _MismatchError(
                 f"topic {topic} has two types: {self.seen[topic]} and {channel.msgtype}"
+            )
+        expected = expected_fields(channel.msgtype)
+        if channel.fields is not None and expected is not None and channel.fields != expected:
+            raise _MismatchError(
+                f"topic {topic}: its schema {channel.msgtype} defines "
+                f"[{', '.join(channel.fields)}], not the installed [{', '.join(expected)}] "
+                "(another version of the message)"
             )
         return True
 
