@@ -1,12 +1,15 @@
 """``prsm-health play``: publish a rosbag2 bag's messages over DDS with their original timing.
 
-A replacement for ``ros2 bag play`` (not on PyPI for Jazzy). Messages are read raw with
-rosbags (MCAP or SQLite rosbag2 directories, bare ``.mcap`` files) and published as the
-serialized CDR bytes they are, through rclpy publishers of their types, in log-time order, at
-``log time / rate`` after the start. A damaged MCAP bag (cut short, a corrupt chunk), which
-rosbags cannot open, is read up to the damage with
-:func:`~prsm_health.bags.raw.read_raw_messages` (into memory) and played the same way; the
-damage is in the :class:`PlayReport`. :class:`BagSource` is what the player needs of either.
+A replacement for ``ros2 bag play`` (not on PyPI for Jazzy). An MCAP bag (rosbag2 directory
+or bare ``.mcap`` file) is read raw with :func:`~prsm_health.bags.raw.read_raw_messages`, as
+the replay reads it (into memory, files and chunks merged into log-time order, up to any
+damage, which is in the :class:`PlayReport`), a SQLite3 rosbag2 directory with rosbags; the
+messages are published as the serialized CDR bytes they are, through rclpy publishers of their
+types, in log-time order, at ``log time / rate`` after the start. (Until 2026-11-27 rosbags
+read every bag it could open: it played the files of a split bag one after another, called
+an unchunked MCAP written out of log-time order damaged, published a second type on a topic
+and took the counts of a metadata.yaml that disagreed with the files; found by a review
+session.) :class:`BagSource` is what the player needs of either.
 
 Optionally ``/clock`` (rosgraph_msgs/Clock) carries the log time, for nodes with
 ``use_sim_time``. Publishers are reliable (a best-effort subscriber matches them as well) and
@@ -192,46 +195,39 @@ class BagSource:
     metadata.yaml declares and those met before the damage). ``counts``: the messages of each
     topic to play. ``new_pass()``: a new pass over those, in log-time order, as ``(topic, log
     time [ns], CDR bytes)``. ``damage``: what ended the reading of a damaged bag (None: the
-    bag is intact). ``rosbags_error``: why rosbags could not open a bag that was read without
-    it (None: rosbags opened it).
+    bag is intact).
     """
 
     types: dict[str, str]
     counts: dict[str, int]
     new_pass: Callable[[], Iterable[tuple[str, int, bytes]]]
     damage: BagError | None = None
-    rosbags_error: str | None = None
 
 
 @contextmanager
 def open_bag(bag: Path, topics: Collection[str]) -> Iterator[BagSource]:
-    """The bag at ``bag`` with the messages of ``topics`` (all if empty) to play: with rosbags,
-    or, if rosbags cannot open it, as a damaged MCAP bag read up to the damage.
+    """The bag at ``bag`` with the messages of ``topics`` (all if empty) to play: an MCAP bag
+    with this package's reader, up to any damage; a SQLite3 one with rosbags.
 
     Raises:
-        PlayInputError: neither can open it (missing, not MCAP, not a bag).
+        PlayInputError: neither can open it (missing, not a bag).
     """
     try:
-        reader = Reader(bag)
-        reader.open()
-    # rosbags raises assorted errors on a damaged summary (UnicodeDecodeError, struct.error,
-    # OverflowError, MemoryError besides its ReaderError): the raw reader judges the bag then.
-    except Exception as exc:
-        rosbags_error = exc
-    else:
+        raw = read_raw_messages(bag, topics)
+    except BagError as unreadable:  # not MCAP (SQLite3), or not a bag
+        try:
+            reader = Reader(bag)
+            reader.open()
+        # rosbags raises assorted errors on what it cannot open (UnicodeDecodeError,
+        # struct.error, OverflowError, MemoryError besides its ReaderError).
+        except Exception as exc:
+            raise PlayInputError(f"cannot open bag {bag}: {_one_line(unreadable)}") from exc
         try:
             yield _rosbags_source(reader, topics, bag)
         finally:
             reader.close()
         return
-    try:
-        raw = read_raw_messages(bag, topics)
-    except BagError as unreadable:
-        raise PlayInputError(
-            f"cannot open bag {bag}: {_one_line(rosbags_error).rstrip('.')}; "
-            f"nor as a damaged MCAP bag: {_one_line(unreadable)}"
-        ) from rosbags_error
-    yield BagSource(raw.types, raw.counts(), lambda: raw, raw.damage, _one_line(rosbags_error))
+    yield BagSource(raw.types, raw.counts(), lambda: raw, raw.damage)
 
 
 def counts_text(counts: Mapping[str, int]) -> str:
@@ -245,8 +241,7 @@ def _one_line(error: BaseException) -> str:
 
 
 def _rosbags_source(reader: Reader, topics: Collection[str], bag: Path) -> BagSource:
-    """The bag as rosbags opened it. A bag whose summary is intact opens even if a chunk is
-    corrupt; rosbags fails when it reaches that chunk, and the pass ends there with a
+    """The (SQLite3) bag as rosbags opened it; a read that fails ends the pass with a
     :class:`~prsm_health.bags.errors.BagDamagedError` (the messages before it were played)."""
     played = [c for c in reader.connections if not topics or c.topic in topics]
     counts: Counter[str] = Counter()
@@ -297,11 +292,6 @@ def play(
     """Play ``source`` (rclpy must be initialised) until its end, or until ``stop`` is set;
     ``warn`` is told, before the first message, what a damaged bag leaves out."""
     _check(source, options)
-    if source.damage is None and source.rosbags_error is not None:
-        warn(
-            f"rosbags cannot open the bag ({source.rosbags_error}); read with prsm_health's "
-            "own MCAP reader, which found every message intact"
-        )
     if source.damage is not None:
         warn(
             f"the bag is damaged: the {sum(source.counts.values())} messages before the "
