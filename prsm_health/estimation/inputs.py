@@ -216,7 +216,8 @@ class SampleBlocker:
         self._last_processed_stamp = math.inf  # the last one of a block, rejected or not
         self._time_reset = False
         self._previous_current = math.nan  # last sample before the pending ones
-        self._previous_spike_like = False  # whether it stood out from both its neighbours
+        # Whether the last two samples before the pending ones stood out from both neighbours.
+        self._previous_spike_like = np.zeros(2, dtype=np.bool_)
         self._stuck_run = 0  # length of the identical-current run ending there
 
     @property
@@ -377,11 +378,12 @@ class SampleBlocker:
     def _spikes_and_stuck(self, current: FloatArray, processed: int, final: bool) -> BoolArray:
         """Rejection mask of the first ``processed`` of the pending ``current`` samples.
 
-        Spikes: isolated samples far from both neighbours, which agree with each other and
-        do not stand out so themselves (the context at either end is the neighbouring sample,
-        or NaN: never a spike; a current alternating every sample by more than the threshold,
-        a ripple aliased at the sampling frequency, was rejected nearly whole, found by a
-        review session: every sample stood out from two neighbours that agreed). Stuck: every
+        Spikes: samples far from both neighbours, which agree with each other (the context
+        at either end is the neighbouring sample, or NaN: never a spike), unless they are the
+        middle of five such in a row: a current alternating every sample by more than the
+        threshold, a ripple aliased at the sampling frequency, was rejected nearly whole (a
+        review session); only its first and last two samples are now. Two spikes two samples
+        apart are three such samples (the one between stands out too), all rejected. Stuck: every
         sample of a run of at least STUCK_RUN_SAMPLES identical values. Blocks are closed
         only STUCK_RUN_SAMPLES samples before the end of what is pending (unless ``final``),
         so any run that reaches into the unprocessed tail is already long enough to be judged,
@@ -395,11 +397,12 @@ class SampleBlocker:
                 & (np.abs(here - after) > self._spike_a)
                 & (np.abs(after - before) < 0.5 * self._spike_a)
             )
-        spikes = (
-            spike_like
-            & ~np.r_[self._previous_spike_like, spike_like[:-1]]
-            & ~np.r_[spike_like[1:], False]
-        )
+        # Spike-like samples that are the middle of five in a row are a ripple, not spikes.
+        flags = np.r_[self._previous_spike_like, spike_like, False, False]
+        spikes = spike_like
+        if spike_like.any():
+            ripple = flags[:-4] & flags[1:-3] & flags[2:-2] & flags[3:-1] & flags[4:]
+            spikes = spike_like & ~ripple
         run_ids = np.cumsum(here != before)  # run 0 continues the run before the pending ones
         lengths = np.bincount(run_ids)
         lengths[0] += self._stuck_run
@@ -413,7 +416,7 @@ class SampleBlocker:
                 self._stuck_run if last == 0 else 0
             )
             self._previous_current = float(current[processed - 1])
-            self._previous_spike_like = bool(spike_like[processed - 1])
+            self._previous_spike_like = flags[processed : processed + 2].copy()
         spikes, stuck = spikes[:processed], stuck[:processed]
         self._count(RejectReason.SPIKE, spikes)
         self._count(RejectReason.STUCK, stuck & ~spikes)

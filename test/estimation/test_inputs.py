@@ -135,17 +135,19 @@ def test_a_step_in_the_current_is_not_a_spike() -> None:
 
 @pytest.mark.parametrize("size", [1, 9, 1000])
 def test_a_current_alternating_every_sample_is_no_train_of_spikes(size: int) -> None:
-    """+-2 A at the sampling frequency (a ripple aliased there) beside an isolated spike: each
-    sample stood out from two neighbours that agreed, and 95 % were rejected as spikes (found
-    by a review session). Only the isolated one is, in any chunks."""
+    """+-2 A at the sampling frequency (a ripple aliased there) beside an isolated spike and
+    two spikes two samples apart: each ripple sample stood out from two neighbours that
+    agreed, and 95 % were rejected as spikes (found by a review session). The ripple's first
+    and last two samples are rejected, the spikes (and the sample between the two, which
+    stands out from them) as before, in any chunks."""
     samples = run(1.0)
     current = samples.current_a.copy()
     current[200:600] += 2.0 * (-1.0) ** np.arange(400)
-    current[800] += 10.0
+    current[[800, 900, 902]] += 10.0
     ripple = MotorSamples(samples.stamp_s, current, samples.speed_rad_s, samples.position_rad)
     _, blocker = feed_in_chunks(ripple, size)
-    assert blocker.counters.rejected[RejectReason.SPIKE] == 1
-    assert blocker.counters.rejected_total == 1
+    assert blocker.counters.rejected[RejectReason.SPIKE] == 4 + 1 + 3
+    assert blocker.counters.rejected_total == 8
 
 
 @pytest.mark.parametrize("size", [1, 9, 1000])
