@@ -42,6 +42,9 @@ Counts = IntArray | int
 #: A current sample this many noise standard deviations away from both neighbours, which
 #: agree with each other, is a spike.
 SPIKE_SIGMAS = 12.0
+#: Two consecutive motor positions within this [rad] of zero that differ by more than half a
+#: turn show that the positions wrap into one turn: from then on no travel is taken from them.
+WRAPPED_WITHIN_RAD = 2.0 * math.pi
 #: This many identical consecutive current samples (while the noise should vary them) are a
 #: stuck sensor; all of them are rejected (blocks close this many samples late for it).
 STUCK_RUN_SAMPLES = 20
@@ -119,8 +122,8 @@ class Block:
     block's last accepted sample to this block's first (a hole in the data: dropouts or
     rejected samples). travel_rad: how far the motor turned from the previous block's last
     accepted sample to this block's last (the difference of their positions; NaN where there
-    is no previous sample on the time line). after_gap, time_reset: the block starts a new
-    time line.
+    is no previous sample on the time line, or the positions have been seen to wrap into one
+    turn, WRAPPED_WITHIN_RAD). after_gap, time_reset: the block starts a new time line.
     accepted_so_far, rejected_so_far: the samples accepted and rejected from the start up to
     the block's last accepted sample, in input order (the same however the samples were
     chunked; rejected samples after it count in the next block).
@@ -213,6 +216,7 @@ class SampleBlocker:
         self._last_block_stamp: float | None = None
         self._last_sample_stamp: float | None = None  # the last accepted one in a block
         self._last_sample_position = math.nan  # and its motor position
+        self._wrapped = False  # the positions wrapped into one turn (WRAPPED_WITHIN_RAD)
         self._last_processed_stamp = math.inf  # the last one of a block, rejected or not
         self._time_reset = False
         self._previous_current = math.nan  # last sample before the pending ones
@@ -546,6 +550,14 @@ class SampleBlocker:
         first_stamps = run.stamp_s[starts]
         last_stamps = run.stamp_s[last]
         last_positions = run.position_rad[last]
+        # Travel is measured only until the positions are seen to wrap into one turn (sample
+        # by sample, so whatever the chunks): a wrapped position says little of it.
+        position = np.r_[self._last_sample_position, run.position_rad]
+        near = np.abs(position) <= WRAPPED_WITHIN_RAD
+        with np.errstate(invalid="ignore"):
+            wraps = (np.abs(np.diff(position)) > math.pi) & near[1:] & near[:-1]
+        wrapped = np.logical_or.accumulate(np.r_[self._wrapped, wraps])[1:][last]
+        self._wrapped = bool(wrapped[-1])
         blocks = []
         for b in range(len(starts)):
             previous = self._last_block_stamp
@@ -556,7 +568,8 @@ class SampleBlocker:
             silence, travel = 0.0, math.nan
             if self._last_sample_stamp is not None and not reset:
                 silence = float(first_stamps[b]) - self._last_sample_stamp
-                travel = abs(float(last_positions[b]) - self._last_sample_position)
+                if not wrapped[b]:
+                    travel = abs(float(last_positions[b]) - self._last_sample_position)
             blocks.append(
                 Block(
                     stamp_s=float(stamps[b]),
