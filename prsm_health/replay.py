@@ -199,24 +199,21 @@ def _truth(bag: Path, damage: list[BagError]) -> TruthSamples | None:
         damage.append(error)
     if truth is None:
         return None
-    finite = truth.finite()
-    if not finite.all():
-        first = int(np.argmin(finite))
+    # The first message that is not finite or not stamped after the one before it: the
+    # truth is scored up to it (whichever comes first, named).
+    bad = np.flatnonzero(~truth.finite())
+    back = np.flatnonzero(~(np.diff(truth.stamp_s) > 0.0)) + 1
+    first = min([*bad[:1], *back[:1]], default=None)
+    if first is not None:
         if not damage:
-            damage.append(BagError(bag, f"{TRUTH_TOPIC}: message {first} holds a non-finite value"))
-        truth = truth[:first]  # scored up to it
-    advancing = np.diff(truth.stamp_s) > 0.0
-    if not advancing.all():
-        first = int(np.argmin(advancing)) + 1
-        if not damage:
-            damage.append(
-                BagError(
-                    bag,
-                    f"{TRUTH_TOPIC}: message {first} is stamped {truth.stamp_s[first]:.9g} s, "
-                    f"not after the one before it ({truth.stamp_s[first - 1]:.9g} s)",
-                )
+            why = (
+                "holds a non-finite value"
+                if first in bad[:1]
+                else f"is stamped {truth.stamp_s[first]:.9g} s, not after the one before it "
+                f"({truth.stamp_s[first - 1]:.9g} s)"
             )
-        truth = truth[:first]  # scored up to it
+            damage.append(BagError(bag, f"{TRUTH_TOPIC}: message {first} {why}"))
+        truth = truth[: int(first)]
     return truth
 
 

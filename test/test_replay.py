@@ -521,10 +521,12 @@ def test_a_truth_whose_stamps_go_back_is_scored_up_to_them(bag: Path, tmp_path: 
     truth = read_truth(bag)
     stamps = truth.stamp_s.copy()
     stamps[600:] -= 2.0
+    load = truth.axial_load_n.copy()
+    load[700] = math.nan  # later: the earlier damage is the one named (it named this one)
     broken = tmp_path / "truth-back"
     with BagWriter(broken) as writer:
         write_motor_states(writer, read_motor_samples(bag, InputTopics()))
-        write_truth(writer, dataclasses.replace(truth, stamp_s=stamps))
+        write_truth(writer, dataclasses.replace(truth, stamp_s=stamps, axial_load_n=load))
     result = replay(broken, params())
     assert result.damage is not None
     assert f"message 600 is stamped {stamps[600]:.9g} s, not after the one before it" in str(
