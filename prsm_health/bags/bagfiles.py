@@ -46,6 +46,17 @@ def _information(meta: Path) -> dict[str, Any]:
     return info
 
 
+def is_sqlite_bag(path: str | Path) -> bool:
+    """Whether ``path`` is a rosbag2 directory whose metadata names SQLite3 storage (what
+    rosbags reads and this package's MCAP reader does not); False for anything else, also
+    what cannot be read."""
+    meta = Path(path) / METADATA
+    try:
+        return meta.is_file() and _information(meta).get("storage_identifier") == "sqlite3"
+    except BagError:
+        return False
+
+
 def _require(meta: Path, info: dict[str, Any], key: str, kind: type) -> Any:
     value = info.get(key)
     if not isinstance(value, kind):

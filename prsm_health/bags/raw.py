@@ -1,18 +1,21 @@
 """The raw messages of every topic of an MCAP bag, merged in log-time order, up to any damage.
 
-rosbags opens only intact MCAP files; :func:`read_raw_messages` reads a bag (a rosbag2
-directory of MCAP files or a bare ``.mcap`` file, :func:`~prsm_health.bags.bagfiles.bag_files`)
-with :class:`~prsm_health.bags.mcap_scan.BagScanner` instead, so that ``prsm-health play`` can
-publish what a damaged bag holds before its damage. One pass meets the topics
+:func:`read_raw_messages` reads a bag (a rosbag2 directory of MCAP files or a bare ``.mcap``
+file, :func:`~prsm_health.bags.bagfiles.bag_files`) with
+:class:`~prsm_health.bags.mcap_scan.BagScanner`, as the replay reads it, so that
+``prsm-health play`` publishes what the replay reads (files and chunks merged, types and
+schemas checked), also what a damaged bag holds before its damage (rosbags opens only intact
+MCAP files). One pass meets the topics
 (:meth:`BagScanner.topics`), then one pass per topic read collects its CDR payloads; nothing
 is decoded.
 
 Everything read is held in memory: the payloads copied one after the other into one numpy
 buffer, plus 28 bytes per message (log time, place, size, topic), about the bag's
 uncompressed size; while it is assembled the peak is about 2.5 times that (14 MB for a 60 s
-bag at 1 kHz). A bag larger than memory cannot be read this way. Holding everything, a
-single stable sort by log time merges the topics (where :mod:`prsm_health.bags.reader`
-merges one topic's segments with bounded memory, using each batch's ``final_before_ns``).
+bag at 1 kHz, so about 0.8 GB for an hour). A bag larger than memory cannot be played.
+Holding everything, a single stable sort by log time merges the topics (where
+:mod:`prsm_health.bags.reader` merges one topic's segments with bounded memory, using each
+batch's ``final_before_ns``).
 """
 
 from __future__ import annotations

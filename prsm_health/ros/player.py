@@ -53,6 +53,7 @@ from rclpy.qos import QoSHistoryPolicy, QoSProfile, QoSReliabilityPolicy
 from rosbags.rosbag2 import Reader
 from rosgraph_msgs.msg import Clock
 
+from prsm_health.bags.bagfiles import is_sqlite_bag
 from prsm_health.bags.errors import BagDamagedError, BagError
 from prsm_health.bags.raw import read_raw_messages
 from prsm_health.ros.messages import time_msg
@@ -212,21 +213,23 @@ def open_bag(bag: Path, topics: Collection[str]) -> Iterator[BagSource]:
     Raises:
         PlayInputError: neither can open it (missing, not a bag).
     """
-    try:
-        raw = read_raw_messages(bag, topics)
-    except BagError as unreadable:  # not MCAP (SQLite3), or not a bag
+    if is_sqlite_bag(bag):
         try:
             reader = Reader(bag)
             reader.open()
-        # rosbags raises assorted errors on what it cannot open (UnicodeDecodeError,
-        # struct.error, OverflowError, MemoryError besides its ReaderError).
+        # rosbags raises assorted errors on what it cannot open (its ReaderError besides
+        # UnicodeDecodeError, struct.error, OverflowError, MemoryError).
         except Exception as exc:
-            raise PlayInputError(f"cannot open bag {bag}: {_one_line(unreadable)}") from exc
+            raise PlayInputError(f"cannot open bag {bag}: {_one_line(exc)}") from exc
         try:
             yield _rosbags_source(reader, topics, bag)
         finally:
             reader.close()
         return
+    try:
+        raw = read_raw_messages(bag, topics)
+    except BagError as unreadable:
+        raise PlayInputError(f"cannot open bag {bag}: {_one_line(unreadable)}") from unreadable
     yield BagSource(raw.types, raw.counts(), lambda: raw, raw.damage)
 
 
