@@ -61,6 +61,16 @@ def cli(*args: str, timeout_s: float = 60.0) -> subprocess.CompletedProcess[str]
     )
 
 
+def _count_none_on(bag: Path, topic: str) -> None:
+    """Make the bag's metadata.yaml count no message on ``topic`` (the file keeps them)."""
+    metadata = bag / "metadata.yaml"
+    info = yaml.safe_load(metadata.read_text())
+    for entry in info["rosbag2_bagfile_information"]["topics_with_message_count"]:
+        if entry["topic_metadata"]["name"] == topic:
+            entry["message_count"] = 0
+    metadata.write_text(yaml.safe_dump(info))
+
+
 def test_play_refuses_what_it_cannot_play(tmp_path: Path) -> None:
     """Input errors exit with 2 (usage, as replay's), failures while playing with 1."""
     missing = cli("play", str(tmp_path / "none"))
@@ -83,12 +93,7 @@ def test_play_refuses_what_it_cannot_play(tmp_path: Path) -> None:
     # metadata.yaml counts none on /motor_state, the file holds them: it ended in a KeyError
     # traceback (found by a review session); the messages are counted as read now.
     uncounted = simulated_bag(tmp_path / "uncounted", short_jam_scene(0.5))
-    metadata = uncounted / "metadata.yaml"
-    info = yaml.safe_load(metadata.read_text())
-    for entry in info["rosbag2_bagfile_information"]["topics_with_message_count"]:
-        if entry["topic_metadata"]["name"] == "/motor_state":
-            entry["message_count"] = 0
-    metadata.write_text(yaml.safe_dump(info))
+    _count_none_on(uncounted, "/motor_state")
     played = cli("play", str(uncounted), "--rate", "100")
     assert played.returncode == 0, played.stderr
     assert "play done: /motor_state 500, /truth/state 50 published" in played.stdout
@@ -117,12 +122,7 @@ def test_play_plays_a_sqlite_bag_with_rosbags(tmp_path: Path) -> None:
     assert f"play done: /motor_state {len(motor)} published" in played.stdout
     # rosbags takes the counts of metadata.yaml: one that counts none on a topic the bag
     # holds ended in a KeyError traceback (found by a review session); one line now.
-    metadata = bag / "metadata.yaml"
-    info = yaml.safe_load(metadata.read_text())
-    for entry in info["rosbag2_bagfile_information"]["topics_with_message_count"]:
-        if entry["topic_metadata"]["name"] == "/other":
-            entry["message_count"] = 0
-    metadata.write_text(yaml.safe_dump(info))
+    _count_none_on(bag, "/other")
     played = cli("play", str(bag), "--rate", "100")
     assert played.returncode == 1 and "Traceback" not in played.stderr
     assert "/other: the bag's metadata counts no message on it" in played.stderr
