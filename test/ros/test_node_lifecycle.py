@@ -278,9 +278,13 @@ def test_a_malformed_clock_or_parameter_message_costs_the_node_nothing(
         with NodeProcess(tmp_path, "odd_msgs", use_sim_time=True, state_file=str(state)) as node:
             node.wait_log("configured")
             listener.wait_for(lambda: clock.get_subscription_count() > 0, 20.0, "/clock")
-            clock.publish(Clock(clock=Time(sec=100)))
-            clock.publish(Clock(clock=Time(sec=-1)))
-            node.wait_log("a ROS callback: ValueError('Seconds value must not be negative')")
+            negative = "a ROS callback: ValueError('Seconds value must not be negative')"
+            deadline = time.monotonic() + 20.0
+            while negative not in node.log():  # until the node's side has matched too
+                assert node.alive() and time.monotonic() < deadline, node.log()
+                clock.publish(Clock(clock=Time(sec=100)))
+                clock.publish(Clock(clock=Time(sec=-1)))
+                listener.spin(0.2)
             request = SetParameters.Request(
                 parameters=[ParameterMsg(name="joint_name", value=ParameterValue(type=10))]
             )
