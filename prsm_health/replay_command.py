@@ -244,14 +244,13 @@ def _replay_into_outputs(
                 stop=stop,
             )
     except ValueError as exc:  # found in the bag after the output was begun (BagError)
-        if args.out is not None and remove_output(args.out):  # else it blocks the rerun
-            raise ValueError(f"{exc} (the output bag {args.out} is not kept)") from exc
+        if dropped := _drop_output(args.out):
+            raise ValueError(f"{exc}{dropped}") from exc
         raise
     if not result.counters.accepted:
         print(summary(args.bag, source, result))
         why = f"no sample of {args.bag} accepted: {_rejected_why(args.bag, topics, result)}"
-        if args.out is not None and remove_output(args.out):  # else it blocks the rerun
-            why += f" (the output bag {args.out} is not kept)"
+        why += _drop_output(args.out)
         if result.damage is not None:  # the damage says more than what it left
             print(f"  {why}")
             return 1
@@ -321,6 +320,14 @@ def _write_outputs(args: argparse.Namespace, result: ReplayResult, notes: list[s
             raise ValueError(f"--report: cannot write into {args.report}: {exc}") from exc
         written.append(f"report {args.report / 'index.html'}")
     return written
+
+
+def _drop_output(out: Path | None) -> str:
+    """Remove the output bag a failed replay began (else it blocks the rerun); what to add to
+    the error ("" if there was none)."""
+    if out is not None and remove_output(out):
+        return f" (the output bag {out} is not kept)"
+    return ""
 
 
 def _partial(result: ReplayResult) -> str:
