@@ -201,19 +201,19 @@ def _truth(bag: Path, damage: list[BagError]) -> TruthSamples | None:
         return None
     # The first message that is not finite or not stamped after the one before it: the
     # truth is scored up to it (whichever comes first, named).
-    bad = np.flatnonzero(~truth.finite())
-    back = np.flatnonzero(~(np.diff(truth.stamp_s) > 0.0)) + 1
-    first = min([*bad[:1], *back[:1]], default=None)
-    if first is not None:
+    finite = truth.finite()
+    usable = finite & np.r_[True, np.diff(truth.stamp_s) > 0.0]
+    if not usable.all():
+        first = int(np.argmin(usable))
         if not damage:
             why = (
                 "holds a non-finite value"
-                if first in bad[:1]
+                if not finite[first]
                 else f"is stamped {truth.stamp_s[first]:.9g} s, not after the one before it "
                 f"({truth.stamp_s[first - 1]:.9g} s)"
             )
             damage.append(BagError(bag, f"{TRUTH_TOPIC}: message {first} {why}"))
-        truth = truth[: int(first)]
+        truth = truth[:first]
     return truth
 
 
