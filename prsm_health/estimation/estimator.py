@@ -34,6 +34,7 @@ from prsm_health.estimation.snapshot import (
 )
 from prsm_health.estimation.surrogate import physics_averages
 from prsm_health.physics.friction import efficiency
+from prsm_health.physics.geometry import require_integer
 from prsm_health.physics.load_distribution import radial_capacity_ratio
 from prsm_health.signals import MotorSamples
 
@@ -107,16 +108,10 @@ class HealthEstimator:
 
     def _check_count(self, jammed_rollers: object) -> None:
         """Refuse a jammed-roller count that is not an integer within 0..N (N: the preset's
-        rollers): a bool or a float passed, and a bool indexed every hypothesis at once."""
-        rollers = self._bank.n_rollers
-        whole = isinstance(jammed_rollers, int | np.integer) and not isinstance(
-            jammed_rollers, bool
-        )
-        if not (whole and 0 <= jammed_rollers <= rollers):  # type: ignore[operator]
-            raise ValueError(
-                f"jammed_rollers: must be an integer within 0..{rollers} (the rollers of "
-                f"{self.params.actuator.preset.name}), got {jammed_rollers!r}"
-            )
+        rollers; :func:`require_integer`, which also refuses a bool: it indexed every
+        hypothesis at once). A numpy integer is a count like an int."""
+        count = int(jammed_rollers) if isinstance(jammed_rollers, np.integer) else jammed_rollers
+        require_integer(count, "jammed_rollers", 0, self._bank.n_rollers)
 
     # --- persistence --------------------------------------------------------------------
     def snapshot(self) -> dict[str, Any]:

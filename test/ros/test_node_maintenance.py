@@ -58,7 +58,7 @@ def test_a_reset_after_maintenance_over_the_service(ros: None, tmp_path: Path) -
 
             refused = listener.call(ResetAfterMaintenance, SERVICE, request(11))
             assert not refused.success
-            refusal = "nothing reset: jammed_rollers: must be an integer within 0..10"
+            refusal = "nothing reset: jammed_rollers: must be an integer in [0, 10], got 11"
             assert refused.message.startswith(refusal)
             assert not state_file.exists()
 
