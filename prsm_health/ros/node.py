@@ -102,9 +102,29 @@ APPLIED_AT_CONFIGURE = frozenset({*SPECS, "use_sim_time"})
 #: A text from a message (a maintenance note, a JointState's names) longer than this is
 #: logged cut, with its length: a 1 MB note, or 20,000 joint names, made one log line of it.
 LOGGED_TEXT_CHARS = 500
-#: A kind of input the node rejects is logged at most once per this long [s] (each kind
-#: apart: with one throttle for all, one kind hid another).
+#: A kind of input the node rejects is logged at most once per this long [s].
 REJECT_LOG_PERIOD_S = 5.0
+#: An error caught around one place (an input, the processing, a save...) is logged at most
+#: once per this long [s]; every one is counted.
+FAULT_LOG_PERIOD_S = 1.0
+
+
+class LogThrottle:
+    """Whether a log line of some kind is due: at most one per ``period_s`` (steady clock),
+    each kind apart (one throttle for all, rclpy's per call site, hid one kind behind
+    another)."""
+
+    def __init__(self, period_s: float) -> None:
+        self._period_s = period_s
+        self._logged_s: defaultdict[str, float] = defaultdict(lambda: -math.inf)
+
+    def due(self, kind: str) -> bool:
+        """True, and the kind's period starts now, if ``kind`` was not logged within it."""
+        now_s = time.monotonic()
+        if now_s - self._logged_s[kind] < self._period_s:
+            return False
+        self._logged_s[kind] = now_s
+        return True
 
 
 def _cut(text: str) -> str:
@@ -454,8 +474,8 @@ class HealthNode(LifecycleNode):
     def _reset_run_state(self) -> None:
         self._pending = _Pending()
         self._node_rejects: Counter[str] = Counter()
-        # When each kind was last logged (steady clock) [s].
-        self._reject_logged_s: defaultdict[str, float] = defaultdict(lambda: -math.inf)
+        self._reject_log = LogThrottle(REJECT_LOG_PERIOD_S)
+        self._fault_log = LogThrottle(FAULT_LOG_PERIOD_S)
         self._tracker = DiagnosticsTracker()
         self._latest, self._latest_restored = None, False
         self._latest_published = True
@@ -476,9 +496,7 @@ class HealthNode(LifecycleNode):
             if sample.problem:
                 self._node_rejects[sample.problem] += 1
                 self._pending.received += 1
-                now_s = time.monotonic()
-                if now_s - self._reject_logged_s[sample.problem] >= REJECT_LOG_PERIOD_S:
-                    self._reject_logged_s[sample.problem] = now_s
+                if self._reject_log.due(sample.problem):
                     self.get_logger().warning(
                         f"JointState rejected ({sample.problem}): joint_name "
                         f"{config.joint_name!r}, the message has {_cut(repr(list(msg.name)))}"
@@ -495,13 +513,11 @@ class HealthNode(LifecycleNode):
 
     def fault(self, where: str, exc: BaseException) -> None:
         """Count and log an exception caught around ``where`` (the filter-consistency status
-        names the latest)."""
+        names the latest; the log, at most once per FAULT_LOG_PERIOD_S for each place)."""
         events = self._tracker.events
         events.error(self._now_s(), f"{where}: {exc!r}")
-        self.get_logger().error(
-            f"{where}: {exc!r} ({events.processing_errors} errors so far)",
-            throttle_duration_sec=1.0,
-        )
+        if self._fault_log.due(where):
+            self.get_logger().error(f"{where}: {exc!r} ({events.processing_errors} errors so far)")
 
     # --- processing and outputs ---------------------------------------------------------
     def _on_batch(self, *, final: bool = False, end_of_data: bool = False) -> None:

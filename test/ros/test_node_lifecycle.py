@@ -18,6 +18,7 @@ from rclpy.qos import QoSProfile, QoSReliabilityPolicy
 from rosgraph_msgs.msg import Clock
 
 from prsm_health.outputs import CONFIGURATION, INPUT_HEALTH
+from prsm_health.ros.node import LogThrottle
 from prsm_health.ros.parameters import PARAMETERS
 from test.ros.harness import Listener, NodeProcess, stop_process
 
@@ -304,3 +305,13 @@ def test_a_malformed_clock_or_parameter_message_costs_the_node_nothing(
         assert "the state is saved" in node.log() and state.is_file()
     finally:
         listener.close()
+
+
+def test_the_log_throttle_holds_each_kind_apart() -> None:
+    """One kind logged does not hold back another (the node's errors shared one rclpy
+    throttle: an error in the processing hid one in a save for a second)."""
+    throttle = LogThrottle(60.0)
+    assert throttle.due("processing")
+    assert not throttle.due("processing")  # within its period
+    assert throttle.due("save")  # another kind: due at once
+    assert LogThrottle(0.0).due("save")
