@@ -267,6 +267,28 @@ def test_a_sensor_clock_jumping_by_decades_is_a_gap_not_a_jam() -> None:
     assert float(np.sqrt(np.mean(error**2))) < 0.01 * rated
 
 
+@pytest.mark.parametrize("position", ["turning", "stuck"])
+def test_a_clock_jump_adds_no_wear_of_its_own(position: str) -> None:
+    """The drive clock jumps by +1.7e9 s mid-run. The block after the gap wears for at most
+    filter.max_gap_s, or for as long as the positions say the motor turned; with the position
+    sensor stuck, only the cap holds it (without it: 154.7 m of precision loss instead of
+    about a micrometre, found by a mutation review)."""
+    scene = scene_from_mapping(downhole(jams=[], duration_s=12.0))
+    motor = simulate(scene).motor
+    if position == "stuck":
+        motor = dataclasses.replace(motor, position_rad=np.full(len(motor), 3.0))
+    later = motor.stamp_s >= 8.0
+    jumped = np.where(later, motor.stamp_s + 1.7e9, motor.stamp_s)
+    params = EstimatorParams(actuator=scene.actuator)
+    final_loss_m = []
+    for stamps in (motor.stamp_s, jumped):
+        estimator = HealthEstimator(params)
+        states = estimator.process(dataclasses.replace(motor, stamp_s=stamps))
+        final_loss_m.append((states + estimator.finish())[-1].precision_loss_m)
+    assert final_loss_m[1] == pytest.approx(final_loss_m[0], rel=0.1)
+    assert final_loss_m[0] > 0.0
+
+
 @pytest.mark.parametrize("rate_hz", [1000.0, 4000.0])
 def test_stamps_in_milliseconds_read_as_seconds_add_no_wear_of_their_own(rate_hz: float) -> None:
     """Every sample a gap of a second at 1 kHz, a hole of a quarter at 4 kHz: that much wear

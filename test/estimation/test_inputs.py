@@ -161,6 +161,21 @@ def test_a_stuck_current_is_rejected_whole_and_a_shorter_run_is_not(size: int) -
     assert blocker.counters.rejected[RejectReason.STUCK] == 100
 
 
+@pytest.mark.parametrize("size", [9, 86])
+def test_a_stuck_run_is_rejected_whole_wherever_it_starts(size: int) -> None:
+    """Blocks close STUCK_RUN_SAMPLES samples late so that a stuck run is seen whole before
+    the block holding its first samples is estimated: closed at once, a 60-sample run from
+    sample 239 fed in chunks of 86 lost 2 of its samples to the block before (found by a
+    mutation review)."""
+    samples = run(1.0)
+    for start in range(225, 256):
+        current = samples.current_a.copy()
+        current[start : start + 60] = 4.4
+        stuck = MotorSamples(samples.stamp_s, current, samples.speed_rad_s, samples.position_rad)
+        _, blocker = feed_in_chunks(stuck, size)
+        assert blocker.counters.rejected[RejectReason.STUCK] == 60, start
+
+
 def test_time_going_backwards_is_rejected_then_followed_as_a_new_time_line() -> None:
     samples = run(2.0)
     stamps = samples.stamp_s.copy()
