@@ -77,12 +77,24 @@ def test_known_errors_delays_and_false_declarations() -> None:
     assert metrics.load_rmse_n == pytest.approx(100.0, rel=0.15)
     assert metrics.load_rmse_percent_rated == pytest.approx(100 * metrics.load_rmse_n / 55e3)
     assert metrics.load_nees_consistent
+    # One NEES a second over 20 s: the 95 % interval of chi2(20) / 20 (tables: 9.591, 34.170).
+    assert metrics.load_nees_interval == pytest.approx((0.47954, 1.70851), rel=1e-4)
     (jam,) = metrics.jams
     assert jam.onset_s == pytest.approx(10.0) and jam.count == 1
     assert jam.delay_s == pytest.approx(0.52)  # the block stamped 10.50 has seen up to 10.52
     assert metrics.false_jam_declarations == 1
     assert metrics.false_jam_seconds == pytest.approx(0.5, abs=0.05)
     assert metrics.precision_loss_error_percent == pytest.approx(2.0, rel=0.05)
+
+
+def test_a_jam_declared_from_the_first_estimate_is_a_false_declaration() -> None:
+    """The first estimate already says 1 jammed where the truth has none (a restored state,
+    a wrong initial count): one false declaration, lasting until the count falls back."""
+    stamps = np.arange(0.02, 20.0, 0.04)
+    states = [state(float(t), 20e3, 100.0, int(t < 2.0), 1e-6 * float(t)) for t in stamps]
+    metrics = score(states, truth(20.0, None), rated_load_n=55e3, largest_screw_speed_rad_s=73.3)
+    assert metrics.false_jam_declarations == 1
+    assert metrics.false_jam_seconds == pytest.approx(2.0, abs=0.05)
 
 
 def test_a_jam_after_the_last_estimate_is_not_scored() -> None:
