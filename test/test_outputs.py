@@ -118,6 +118,12 @@ def test_non_finite_values_are_replaced_and_counted() -> None:
     assert replaced == {"axial_load_n": 1, "efficiency": 1, "jammed_rollers_probability": 1}
     floats = [v for v in fields.values() if isinstance(v, float)]
     assert all(math.isfinite(v) for v in floats + fields["jammed_rollers_probability"])
+    # A negative probability, or none at all, is no distribution either (a mutation review).
+    for probabilities in ((-0.1, 0.6, 0.5), (0.0, 0.0, 0.0)):
+        replaced.clear()
+        fields = health_estimate_fields(state(jam_probabilities=probabilities), replaced=replaced)
+        assert fields["jammed_rollers_probability"] == pytest.approx([1 / 3] * 3)
+        assert replaced == {"jammed_rollers_probability": 1}
 
 
 def test_load_levels_follow_the_rated_fractions() -> None:
