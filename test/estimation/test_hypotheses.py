@@ -191,6 +191,22 @@ def test_safe_sqrt_repairs_a_matrix_that_lost_definiteness() -> None:
     assert np.diagonal(repaired) == pytest.approx(np.diagonal(units))
 
 
+def test_a_collapsed_variance_is_raised_to_its_floor() -> None:
+    """A state whose variance round-off took to zero or below (never seen in the soaks, so a
+    mutation of the floor went unseen): each variance comes back at least
+    VARIANCE_FLOOR_RATIO of its initial one and the matrix has a Cholesky factor."""
+    p = params()
+    bank = JamHypotheses(p, TorqueModel(p))
+    initial = np.diagonal(bank.hypotheses[0].filter.P).copy()
+    collapsed = np.diag(initial)
+    collapsed[LOAD, LOAD] = 0.0
+    collapsed[LOAD + 1, LOAD + 1] = -1e-30
+    safe = bank._safe_covariance(collapsed)
+    assert np.all(np.diagonal(safe) >= hypotheses.VARIANCE_FLOOR_RATIO * initial)
+    assert safe[LOAD, LOAD] == pytest.approx(hypotheses.VARIANCE_FLOOR_RATIO * initial[LOAD])
+    np.linalg.cholesky(safe)
+
+
 def test_pruning_keeps_the_likely_counts_and_the_next_one() -> None:
     p = params(prune_hypotheses=True)
     bank = JamHypotheses(p, TorqueModel(p))
