@@ -53,8 +53,9 @@ STUCK_RUN_SAMPLES = 20
 #: wrong unit) a block would never end, and the samples pending for it grew without bound
 #: (23 MB and 16 ms per node batch in a minute).
 MAX_SAMPLE_RATE_HZ = 250_000.0
-#: A block whose samples span less than this [s] has no measurable slope: its acceleration
-#: and current trend are taken as zero (a speed step over a vanishing span would overflow).
+#: A block whose samples span less than this [s] has no measurable slope: its current trend
+#: is taken as zero, its acceleration from the sample before it (Block), or as zero if that
+#: is as close (a speed step over a vanishing span would overflow).
 SHORTEST_SLOPE_SPAN_S = 1e-6
 #: A jumped-back clock is followed only after this many samples on its new time line (and
 #: ``filter.time_reset_after_s`` of its time): a few late samples far apart, a
@@ -110,9 +111,10 @@ class Block:
     stamp_s: mean stamp. duration_s: time since the previous block's mean stamp (the filter's
     prediction step, across a gap too; the grid period for the first block of a time line).
     motor_torque_nm: k_t times the mean current. motor_speed_rad_s, motor_acceleration_rad_s2:
-    mean speed, and the speed change over the block's span divided by that span;
+    mean speed, and the speed change over the block's span divided by that span (a block
+    without a span, one sample: since the last sample before it on its time line);
     motor_acceleration_var_rad2_s4: that acceleration's variance from the speed noise,
-    2 sigma^2 / span^2 (two samples' difference; 0 where the span is too short to take one).
+    2 sigma^2 / span^2 (two samples' difference; 0 where there is no span to take one).
     carrier_cos, carrier_sin: means of cos and sin of the carrier angle (exact averaging of
     the carrier-frequency ripple).
     direction: +1 or -1 when every sample moves that way faster than the standstill speed,
@@ -216,6 +218,7 @@ class SampleBlocker:
         self._last_block_stamp: float | None = None
         self._last_sample_stamp: float | None = None  # the last accepted one in a block
         self._last_sample_position = math.nan  # and its motor position
+        self._last_sample_speed = math.nan  # and its motor speed
         self._wrapped = False  # the positions wrapped into one turn (WRAPPED_WITHIN_RAD)
         self._last_processed_stamp = math.inf  # the last one of a block, rejected or not
         self._time_reset = False
@@ -566,10 +569,15 @@ class SampleBlocker:
             if previous is not None and not reset:
                 duration = float(stamps[b]) - previous
             silence, travel = 0.0, math.nan
+            acceleration, acceleration_var = float(slope[b]), float(slope_var[b])
             if self._last_sample_stamp is not None and not reset:
                 silence = float(first_stamps[b]) - self._last_sample_stamp
                 if not wrapped[b]:
                     travel = abs(float(last_positions[b]) - self._last_sample_position)
+                since_s = float(last_stamps[b]) - self._last_sample_stamp
+                if not measurable[b] and not new_line[b] and since_s > SHORTEST_SLOPE_SPAN_S:
+                    acceleration = (float(w[last[b]]) - self._last_sample_speed) / since_s
+                    acceleration_var = 2.0 * self._params.noise.speed_std_rad_s**2 / since_s**2
             blocks.append(
                 Block(
                     stamp_s=float(stamps[b]),
@@ -577,12 +585,12 @@ class SampleBlocker:
                     samples=int(counts[b]),
                     motor_torque_nm=float(torque[b]),
                     motor_speed_rad_s=float(mean_w[b]),
-                    motor_acceleration_rad_s2=float(slope[b]),
+                    motor_acceleration_rad_s2=acceleration,
                     carrier_cos=float(cos_mean[b]),
                     carrier_sin=float(sin_mean[b]),
                     direction=int(direction[b]),
                     current_residual_var_a2=float(residual_var[b]),
-                    motor_acceleration_var_rad2_s4=float(slope_var[b]),
+                    motor_acceleration_var_rad2_s4=acceleration_var,
                     silence_before_s=silence,
                     travel_rad=travel,
                     after_gap=bool(new_line[b]),
@@ -594,6 +602,7 @@ class SampleBlocker:
             self._last_block_stamp = float(stamps[b])
             self._last_sample_stamp = float(last_stamps[b])
             self._last_sample_position = float(last_positions[b])
+            self._last_sample_speed = float(w[last[b]])
             self._time_reset = False
         return blocks
 
