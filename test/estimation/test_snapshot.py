@@ -71,6 +71,52 @@ def test_a_state_of_another_screw_is_refused_as_foreign_unless_damaged() -> None
     assert not isinstance(info.value, ForeignStateError)
 
 
+def _other_screw(base: EstimatorParams, part: str) -> EstimatorParams:
+    """``base`` with one value of the preset's ``part`` (one that defines the screw) changed."""
+    preset = base.actuator.preset
+    geometry, friction = preset.geometry, preset.friction
+    wear, fatigue = preset.wear, preset.fatigue
+    other = {
+        "geometry": dataclasses.replace(
+            preset, geometry=dataclasses.replace(geometry, nut_outer_radius_m=32.0e-3)
+        ),
+        "friction": dataclasses.replace(
+            preset, friction=dataclasses.replace(friction, sliding_friction_coefficient=0.12)
+        ),
+        "wear": dataclasses.replace(
+            preset,
+            wear=dataclasses.replace(
+                wear,
+                archard_coefficient=10.0 * wear.archard_coefficient,
+                adhesive_wear_coefficient=10.0 * wear.adhesive_wear_coefficient,
+            ),
+        ),
+        "fatigue": dataclasses.replace(
+            preset, fatigue=dataclasses.replace(fatigue, stress_exponent=7.0)
+        ),
+    }[part]
+    return dataclasses.replace(base, actuator=dataclasses.replace(base.actuator, preset=other))
+
+
+@pytest.mark.parametrize("part", ["geometry", "friction", "wear", "fatigue"])
+def test_a_state_is_foreign_under_a_preset_that_differs_in_any_part_of_the_screw(
+    part: str,
+) -> None:
+    """Pins that every part of the preset that defines the screw (geometry, friction, wear,
+    fatigue) is in the screw's fingerprint: a state saved under one preset and restored under
+    a preset with one value of any of them changed is refused as another screw's, not resumed
+    in part with its degradation. A mutation review found the wear unguarded (left out of the
+    fingerprint, a state restored under wear coefficients x10 was resumed as a partial
+    restore)."""
+    base = params()
+    saved = json.loads(json.dumps(HealthEstimator(base).snapshot()))
+    other = _other_screw(base, part)
+    assert getattr(other.actuator.preset, part) != getattr(base.actuator.preset, part)
+    with pytest.raises(ForeignStateError, match=r"^the state belongs to another screw"):
+        HealthEstimator(other).restore(saved)
+    assert HealthEstimator(base).restore(saved) == ()  # its own screw resumes it whole
+
+
 def test_a_state_saved_before_the_screw_fingerprint_still_resumes() -> None:
     """Files saved before 2026-11-26 have only the actuator's digest, of this tuple: it must
     not change, or every such file would be set aside at the upgrade."""
