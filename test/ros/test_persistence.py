@@ -7,6 +7,7 @@ import errno
 import json
 import math
 import os
+import time
 from pathlib import Path
 
 import pytest
@@ -156,6 +157,28 @@ def test_corrupt_file_is_kept_aside(
     assert not path.exists()
     assert reason in outcome.problem
     assert estimator.snapshot() == before
+
+
+def test_bad_files_kept_aside_in_the_same_second_are_numbered_apart(
+    tmp_path: Path, params: EstimatorParams, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    """Pins that a kept-aside name already taken is numbered on until a free one (-2, -3):
+    with the clock standing still, three bad state files in turn are all kept, each with its
+    content. A mutation review found it unguarded (one number tried only: the third went to
+    the second's name and replaced it)."""
+    monkeypatch.setattr(time, "strftime", lambda _format, _time: "20260101T000000Z")
+    store = StateStore(tmp_path / "left.json", "left")
+    kept = []
+    for n in range(3):
+        store.path.write_text(f"bad state {n}")
+        outcome = store.restore(HealthEstimator(params))
+        assert not outcome.restored and outcome.kept_aside is not None
+        kept.append(outcome.kept_aside)
+    names = [path.name for path in kept]
+    stamp = "left.json.corrupt-20260101T000000Z"
+    assert names == [stamp, f"{stamp}-2", f"{stamp}-3"]
+    assert [path.read_text() for path in kept] == ["bad state 0", "bad state 1", "bad state 2"]
+    assert sorted(p.name for p in tmp_path.iterdir()) == sorted(names)
 
 
 def test_malformed_estimator_state_is_kept_aside(
