@@ -244,6 +244,29 @@ def test_a_gap_is_a_gap_whatever_the_chunking(size: int) -> None:
     assert sum(b.after_gap for b in blocks) == 1 and blocker.counters.gaps == 1
 
 
+@pytest.mark.parametrize("size", [1, 7, 2000])
+def test_a_position_re_homed_to_zero_is_a_jump_not_a_wrap(size: int) -> None:
+    """Pins the wrap rule's "both positions within one turn of zero": a position re-homed from
+    150 rad to 0 (one side only near zero) is a jump, and the travel is measured on after it,
+    whatever the chunks; a position wrapped into one turn has none. A mutation review found it
+    unguarded ("either position near zero": every travel after the re-homing was NaN)."""
+    samples = run(2.0)
+    position = samples.position_rad.copy()
+    assert position[999] > 100.0
+    position[1000:] -= position[1000]  # re-homed: 149.85 rad, then 0
+    blocks, _ = feed_in_chunks(dataclasses.replace(samples, position_rad=position), size)
+    no_travel = [i for i, b in enumerate(blocks) if not math.isfinite(b.travel_rad)]
+    assert no_travel == [0]  # only the first block: no sample before it
+    jump = next(i for i, b in enumerate(blocks) if b.travel_rad > 100.0)  # sample 1000's block
+    assert blocks[jump - 1].stamp_s < samples.stamp_s[1000] < blocks[jump + 1].stamp_s
+    # 150 rad/s at 1 kHz: 0.15 rad a sample, measured from the last sample of the block before.
+    after = [b.travel_rad for b in blocks[jump + 1 :]]
+    assert after == pytest.approx([0.15 * b.samples for b in blocks[jump + 1 :]], rel=1e-9)
+    wrapped = np.mod(samples.position_rad + math.pi, 2.0 * math.pi) - math.pi
+    blocks, _ = feed_in_chunks(dataclasses.replace(samples, position_rad=wrapped), size)
+    assert all(math.isnan(b.travel_rad) for b in blocks)
+
+
 @pytest.mark.parametrize("size", [1, 7, 501, 2000])
 def test_one_stamp_far_ahead_is_rejected_not_the_samples_after_it(size: int) -> None:
     """One sample stamped 30 years ahead in a clean stream: it is rejected as out of order,
