@@ -113,6 +113,30 @@ def test_invalid_documents_name_the_field(document: dict[str, object], field: st
         params_from_mapping(document)
 
 
+@pytest.mark.parametrize(
+    ("warn", "error", "low", "high"),
+    [
+        ("load_warn_fraction", "load_error_fraction", 2.0, 1.0),
+        ("precision_loss_warn_fraction", "precision_loss_error_fraction", 1.5, 1.0),
+        ("fatigue_warn_damage", "fatigue_error_damage", 0.95, 0.5),
+    ],
+)
+def test_a_warn_threshold_above_its_error_threshold_is_refused(
+    warn: str, error: str, low: float, high: float
+) -> None:
+    """Pins each diagnostics warn/error pair's order check (warn at or below error; equal is
+    accepted): a warn level above the error level is refused naming the warn key. A mutation
+    review found the fatigue pair unguarded (its check dropped, warn 0.95 with error 0.5 was
+    accepted)."""
+    actuator = {"preset": "dong2022-downhole"}
+    with pytest.raises(
+        ParameterError, match=rf"^diagnostics\.{warn}: must not exceed diagnostics\.{error}$"
+    ):
+        params_from_mapping({"actuator": actuator, "diagnostics": {warn: low, error: high}})
+    equal = params_from_mapping({"actuator": actuator, "diagnostics": {warn: high, error: high}})
+    assert getattr(equal.diagnostics, warn) == getattr(equal.diagnostics, error) == high
+
+
 def test_parameters_at_their_cross_checked_limits_are_accepted() -> None:
     params = params_from_mapping(
         {
