@@ -166,6 +166,29 @@ def test_event_tracker() -> None:
     assert (events.last_error_s, events.last_error) == (8.0, "processing error: boom")
 
 
+def test_one_time_reset_warns_for_the_recent_window_only() -> None:
+    """Pins that a time reset warns once, when the count of resets grows: the same count seen
+    again later is no new reset, and the filter-consistency WARN clears after the window. A
+    mutation review found it unguarded (">=": every later observation renewed the warning and
+    kept the status at WARN forever after one reset)."""
+    params = params_from_mapping({"actuator": {"preset": "dong2022-downhole"}})
+    tracker = DiagnosticsTracker()
+    counters = InputCounters(time_resets=1)
+
+    def consistency(now_s: float) -> tuple[Level, str]:
+        tracker.inputs.update(now_s, 100, accepted=100, rejected={})  # input keeps coming
+        by_name = {s.name: s for s in tracker.statuses(state(), params, "left", now_s)}
+        return by_name[FILTER_CONSISTENCY].level, by_name[FILTER_CONSISTENCY].message
+
+    tracker.events.observe(10.0, [], counters)
+    assert consistency(10.0) == (Level.WARN, "input time jumped back: load re-initialised")
+    tracker.events.observe(110.0, [], counters)
+    level, message = consistency(110.0)
+    assert level == Level.OK and message.startswith("consistent")
+    events = tracker.events.events()
+    assert (events.time_resets, events.last_warning_s) == (1, 10.0)
+
+
 def test_diagnostics_tracker_gives_the_statuses() -> None:
     params = params_from_mapping({"actuator": {"preset": "dong2022-downhole"}})
     tracker = DiagnosticsTracker()
