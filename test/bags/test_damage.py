@@ -5,12 +5,18 @@ from __future__ import annotations
 import struct
 from pathlib import Path
 
+import numpy as np
 import pytest
 from mcap.reader import NonSeekingReader
+from mcap.stream_reader import CRCValidationError
+from mcap.writer import CompressionType
+from mcap.writer import Writer as McapWriter
 
+from prsm_health.bags.codecs import encode_motor_states
 from prsm_health.bags.errors import BagDamagedError, BagError
 from prsm_health.bags.reader import InputTopics, iter_motor_samples, read_motor_samples, read_truth
-from prsm_health.bags.typestore import MOTOR_STATE
+from prsm_health.bags.stamps import seconds_to_stamps
+from prsm_health.bags.typestore import MOTOR_STATE, typestore
 from prsm_health.bags.writer import BagWriter, write_motor_states, write_truth
 from prsm_health.signals import MotorSamples
 from test.bags.samples import (
@@ -246,3 +252,48 @@ def test_truth_whose_roller_count_changes(tmp_path: Path, split: bool) -> None:
     truth, error = read_truth(bag, partial_ok=True)
     assert truth is not None and truth.roller_jammed.shape == (before, 5)
     assert error is not None and "roller_jammed has shape (7,), earlier messages (5,)" in str(error)
+
+
+def test_a_chunk_failing_its_crc_check_is_damage(tmp_path: Path) -> None:
+    """Uncompressed chunks written by the mcap library carry a CRC (the rosbags writer stores
+    0, which no check reaches): one current changed inside a later chunk, 1.5 A to 150 A, is
+    damage named by the CRC, and only the chunks before it are delivered. A mutation review
+    found this unguarded: with the CRC check disabled all 2,000 samples were read, the
+    changed 150 A among them, and no damage was reported."""
+    motor = motor_samples(2000, faults=False)
+    motor.current_a[1500] = 1.5
+    sec, nanosec = seconds_to_stamps(motor.stamp_s)
+    columns = {"sec": sec, "nanosec": nanosec, "current_a": motor.current_a}
+    columns |= {"speed_rad_s": motor.speed_rad_s, "position_rad": motor.position_rad}
+    payloads = encode_motor_states(columns, frame_id="m")
+    path = tmp_path / "crc.mcap"
+    msgdef, _ = typestore().generate_msgdef(MOTOR_STATE, ros_version=2)
+    with path.open("wb") as stream:
+        writer = McapWriter(stream, chunk_size=50_000, compression=CompressionType.NONE)
+        writer.start(profile="ros2", library="test")
+        schema = writer.register_schema(MOTOR_STATE, "ros2msg", msgdef.encode())
+        channel = writer.register_channel("/motor_state", "cdr", schema)
+        for i, payload in enumerate(payloads):
+            writer.add_message(channel, 1000 + i, bytes(payload), 1000 + i, sequence=i)
+        writer.finish()
+    data = bytearray(path.read_bytes())
+    old, new = struct.pack("<d", 1.5), struct.pack("<d", 150.0)
+    assert data.count(old) == 1
+    where = data.index(old)
+    chunks = _chunk_offsets(bytes(data))
+    damaged = max(c for c in chunks if c < where)
+    assert damaged != chunks[0]  # a later chunk: there are samples before it
+    data[where : where + len(old)] = new
+    path.write_bytes(bytes(data))
+    before = 0  # messages the mcap library streams, checking CRCs, before the damaged chunk
+    with path.open("rb") as stream, pytest.raises(CRCValidationError):
+        reader = NonSeekingReader(stream, validate_crcs=True)
+        for _ in reader.iter_messages(log_time_order=False):
+            before += 1
+    partial, error = read_motor_samples(path, partial_ok=True)
+    assert isinstance(error, BagDamagedError) and error.path == path
+    assert f"damaged at byte {damaged}: " in str(error)
+    assert f"Chunk record at byte {damaged} fails its CRC check" in str(error)
+    assert 0 < len(partial) == before < 1500
+    assert_same(partial, with_quantised_stamps(motor[0:before]))
+    assert np.max(np.abs(partial.current_a)) < 150.0
