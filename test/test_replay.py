@@ -538,6 +538,29 @@ def test_a_truth_whose_stamps_go_back_is_scored_up_to_them(bag: Path, tmp_path: 
     assert result.metrics.load_rmse_n < 2.0 * intact.metrics.load_rmse_n
 
 
+def test_a_truth_stamp_equal_to_the_one_before_is_damage(bag: Path, tmp_path: Path) -> None:
+    """Truth stamps must advance: message 600 stamped as message 599 is damage there, and
+    the truth is scored up to it (600 of its 1200 messages). A mutation review found this
+    unguarded: with a repeated stamp taken as advancing, there was no damage and all 1200
+    were kept."""
+    truth = read_truth(bag)
+    assert len(truth) == 1200
+    stamps = truth.stamp_s.copy()
+    stamps[600] = stamps[599]
+    repeated = tmp_path / "truth-repeated"
+    with BagWriter(repeated) as writer:
+        write_motor_states(writer, read_motor_samples(bag, InputTopics()))
+        write_truth(writer, dataclasses.replace(truth, stamp_s=stamps))
+    result = replay(repeated, params())
+    assert result.damage is not None
+    expected = (
+        f"{TRUTH_TOPIC}: message 600 is stamped {stamps[600]:.9g} s, not after the one "
+        f"before it ({stamps[599]:.9g} s)"
+    )
+    assert expected in str(result.damage)
+    assert result.truth is not None and len(result.truth) == 600
+
+
 def test_metrics_that_cannot_be_computed_are_null_in_the_json(
     tmp_path: Path, capsys: pytest.CaptureFixture[str]
 ) -> None:
@@ -619,6 +642,36 @@ def test_diagnostics_go_on_after_the_clock_jumps_back(bag: Path, tmp_path: Path)
     spacing = np.diff(new_line[:-1])
     assert np.all((spacing > 0.9) & (spacing < 1.1)), new_line
     assert new_line[-1] == pytest.approx(stamps[-1])
+
+
+def test_the_last_diagnostics_are_not_written_twice(bag: Path, tmp_path: Path) -> None:
+    """2,495 samples of the scene in motion (from its second 1), restamped exactly 1 ms
+    apart: pieces of 499 samples, an estimate from the first, the diagnostics due at the
+    last piece, which writes them at the last input's stamp; the end (the inputs' clock not
+    moved since) does not write them again, so the /diagnostics stamps strictly increase.
+    A mutation review found this unguarded: written at the end even when the clock had not
+    moved since the last, the last stamp came twice (0.498, 1.496, 2.494, 2.494)."""
+    motor = read_motor_samples(bag, InputTopics())[1000:3495]
+    exact = MotorSamples(
+        1e-3 * np.arange(2495), motor.current_a, motor.speed_rad_s, motor.position_rad
+    )
+    short = tmp_path / "short"
+    with BagWriter(short) as writer:
+        write_motor_states(writer, exact)
+    out = tmp_path / "out"
+    result = replay(short, params(), out=out)
+    assert result.samples == 2495
+    store = typestore()
+    with Reader(out) as reader:
+        seconds = [
+            (message := store.deserialize_cdr(raw, c.msgtype)).header.stamp.sec
+            + 1e-9 * message.header.stamp.nanosec
+            for c, _, raw in reader.messages()
+            if c.topic == DIAGNOSTICS_TOPIC
+        ]
+    assert np.all(np.diff(seconds) > 0.0), seconds
+    # Once per second from the first piece's end, the last at the last piece's end.
+    assert seconds == pytest.approx([0.498, 1.496, 2.494], abs=1e-9)
 
 
 def test_the_load_plot_shows_the_error_inside_its_band_when_there_is_truth(bag: Path) -> None:
