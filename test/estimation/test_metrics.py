@@ -158,6 +158,24 @@ def test_the_block_in_which_a_roller_seizes_may_report_it() -> None:
     assert one_block_early.false_jam_declarations == 1
 
 
+def test_the_true_count_at_a_truth_stamp_is_that_samples_own() -> None:
+    """Counts come from the latest truth sample at or before the time compared: an estimate
+    that has seen up to exactly the stamp of the truth sample where the jam starts compares
+    with that sample's count (1), so its count 1 is no false declaration. A mutation review
+    found this unguarded: looked up with side="left", the sample before (count 0) was taken
+    and one false declaration counted."""
+    jams = truth(3.0, jam_at=1.0)
+    onset = float(jams.stamp_s[100])
+    assert jams.jammed_rollers[99] == 0 and jams.jammed_rollers[100] == 1
+    # The first has seen up to the midpoint, 0.75 s (count 0); the last up to its own stamp.
+    states = [state(0.5, 20e3, 100.0, 0, 0.0), state(onset, 20e3, 100.0, 1, 0.0)]
+    metrics = score(states, jams, rated_load_n=55e3, largest_screw_speed_rad_s=73.3)
+    assert metrics.clock_offsets_s == ()  # compared at their own stamps, no clock jump
+    assert metrics.false_jam_declarations == 0
+    (jam,) = metrics.jams
+    assert jam.onset_s == onset and jam.count == 1 and jam.delay_s == 0.0
+
+
 def test_on_truth_clock_shifts_each_time_line_by_its_own_offset() -> None:
     """Each offset applies from its TIME_RESET to the next; the estimates before the first
     reset keep their stamps; offsets that do not match the resets are refused by name."""
