@@ -9,8 +9,12 @@ from pathlib import Path
 import numpy as np
 import yaml
 from mcap.reader import NonSeekingReader
+from mcap.writer import CompressionType
+from mcap.writer import Writer as McapWriter
 
+from prsm_health.bags.codecs import encode_motor_states
 from prsm_health.bags.stamps import seconds_to_stamps, stamps_to_seconds
+from prsm_health.bags.typestore import MOTOR_STATE, typestore
 from prsm_health.bags.writer import BagWriter, write_joint_states, write_motor_states, write_truth
 from prsm_health.signals import MotorSamples, TruthSamples
 
@@ -118,3 +122,29 @@ def streamed_messages(path: Path) -> list[tuple[int, int, tuple[str, int, bytes]
         except Exception:  # noqa: S110 - the damage ends the stream; what came before counts
             pass
     return found
+
+
+def motor_state_payloads(motor: MotorSamples) -> list[bytes]:
+    """Each sample as the CDR payload of a MotorState (frame_id "m")."""
+    sec, nanosec = seconds_to_stamps(motor.stamp_s)
+    columns = {"sec": sec, "nanosec": nanosec, "current_a": motor.current_a}
+    columns |= {"speed_rad_s": motor.speed_rad_s, "position_rad": motor.position_rad}
+    return [bytes(p) for p in encode_motor_states(columns, frame_id="m")]
+
+
+def write_with_mcap_library(
+    path: Path, messages: list[tuple[str, int, bytes]], *, chunk_size: int
+) -> None:
+    """A bare .mcap of MotorState ``(topic, log time [ns], payload)`` messages written by the
+    mcap library (uncompressed chunks, which carry a CRC: the rosbags writer stores none)."""
+    msgdef, _ = typestore().generate_msgdef(MOTOR_STATE, ros_version=2)
+    with path.open("wb") as stream:
+        writer = McapWriter(stream, chunk_size=chunk_size, compression=CompressionType.NONE)
+        writer.start(profile="ros2", library="test")
+        schema = writer.register_schema(MOTOR_STATE, "ros2msg", msgdef.encode())
+        channels: dict[str, int] = {}
+        for sequence, (topic, log_time, payload) in enumerate(messages):
+            if topic not in channels:
+                channels[topic] = writer.register_channel(topic, "cdr", schema)
+            writer.add_message(channels[topic], log_time, payload, log_time, sequence=sequence)
+        writer.finish()

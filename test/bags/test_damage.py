@@ -9,24 +9,22 @@ import numpy as np
 import pytest
 from mcap.reader import NonSeekingReader
 from mcap.stream_reader import CRCValidationError
-from mcap.writer import CompressionType
-from mcap.writer import Writer as McapWriter
 
-from prsm_health.bags.codecs import encode_motor_states
 from prsm_health.bags.errors import BagDamagedError, BagError
 from prsm_health.bags.reader import InputTopics, iter_motor_samples, read_motor_samples, read_truth
-from prsm_health.bags.stamps import seconds_to_stamps
-from prsm_health.bags.typestore import MOTOR_STATE, typestore
+from prsm_health.bags.typestore import MOTOR_STATE
 from prsm_health.bags.writer import BagWriter, write_motor_states, write_truth
 from prsm_health.signals import MotorSamples
 from test.bags.samples import (
     assert_same,
     mcap_file,
     motor_samples,
+    motor_state_payloads,
     split_bag,
     truth_samples,
     with_quantised_stamps,
     write_bag,
+    write_with_mcap_library,
 )
 
 COUNT = 40000
@@ -262,20 +260,9 @@ def test_a_chunk_failing_its_crc_check_is_damage(tmp_path: Path) -> None:
     changed 150 A among them, and no damage was reported."""
     motor = motor_samples(2000, faults=False)
     motor.current_a[1500] = 1.5
-    sec, nanosec = seconds_to_stamps(motor.stamp_s)
-    columns = {"sec": sec, "nanosec": nanosec, "current_a": motor.current_a}
-    columns |= {"speed_rad_s": motor.speed_rad_s, "position_rad": motor.position_rad}
-    payloads = encode_motor_states(columns, frame_id="m")
     path = tmp_path / "crc.mcap"
-    msgdef, _ = typestore().generate_msgdef(MOTOR_STATE, ros_version=2)
-    with path.open("wb") as stream:
-        writer = McapWriter(stream, chunk_size=50_000, compression=CompressionType.NONE)
-        writer.start(profile="ros2", library="test")
-        schema = writer.register_schema(MOTOR_STATE, "ros2msg", msgdef.encode())
-        channel = writer.register_channel("/motor_state", "cdr", schema)
-        for i, payload in enumerate(payloads):
-            writer.add_message(channel, 1000 + i, bytes(payload), 1000 + i, sequence=i)
-        writer.finish()
+    messages = [("/motor_state", 1000 + i, p) for i, p in enumerate(motor_state_payloads(motor))]
+    write_with_mcap_library(path, messages, chunk_size=50_000)
     data = bytearray(path.read_bytes())
     old, new = struct.pack("<d", 1.5), struct.pack("<d", 150.0)
     assert data.count(old) == 1

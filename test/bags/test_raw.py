@@ -8,22 +8,20 @@ from pathlib import Path
 import numpy as np
 import pytest
 from mcap.reader import make_reader
-from mcap.writer import CompressionType
-from mcap.writer import Writer as McapWriter
 
-from prsm_health.bags.codecs import encode_motor_states
 from prsm_health.bags.errors import BagDamagedError, BagError
 from prsm_health.bags.raw import read_raw_messages
-from prsm_health.bags.stamps import seconds_to_stamps
-from prsm_health.bags.typestore import GROUND_TRUTH, MOTOR_STATE, typestore
+from prsm_health.bags.typestore import GROUND_TRUTH, MOTOR_STATE
 from prsm_health.bags.writer import BagWriter, write_motor_states, write_truth
 from test.bags.samples import (
     mcap_file,
     motor_samples,
+    motor_state_payloads,
     split_bag,
     streamed_messages,
     truth_samples,
     write_bag,
+    write_with_mcap_library,
 )
 
 MOTOR_COUNT = 30_000
@@ -139,22 +137,10 @@ def test_equal_log_times_come_in_the_order_of_the_topics_before_that_of_the_bag(
     /a@0, /b@5, /a@5, one message per chunk (the mcap library's writer, chunk_size=1), come
     out /a@0, /a@5, /b@5 (/a was met first), not in the bag's order /a@0, /b@5, /a@5. A
     mutation review found this unguarded: the sort keys place and topic swapped survived."""
-    motor = motor_samples(3, faults=False)
-    sec, nanosec = seconds_to_stamps(motor.stamp_s)
-    columns = {"sec": sec, "nanosec": nanosec, "current_a": motor.current_a}
-    columns |= {"speed_rad_s": motor.speed_rad_s, "position_rad": motor.position_rad}
-    payloads = [bytes(p) for p in encode_motor_states(columns, frame_id="m")]
+    payloads = motor_state_payloads(motor_samples(3, faults=False))
     written = [("/a", 0, payloads[0]), ("/b", 5, payloads[1]), ("/a", 5, payloads[2])]
     path = tmp_path / "ties.mcap"
-    msgdef, _ = typestore().generate_msgdef(MOTOR_STATE, ros_version=2)
-    with path.open("wb") as stream:
-        writer = McapWriter(stream, chunk_size=1, compression=CompressionType.NONE)
-        writer.start(profile="ros2", library="test")
-        schema = writer.register_schema(MOTOR_STATE, "ros2msg", msgdef.encode())
-        channels = {t: writer.register_channel(t, "cdr", schema) for t in ("/a", "/b")}
-        for topic, log_time, payload in written:
-            writer.add_message(channels[topic], log_time, payload, log_time)
-        writer.finish()
+    write_with_mcap_library(path, written, chunk_size=1)
     with path.open("rb") as stream:
         summary = make_reader(stream).get_summary()
     assert summary is not None and len(summary.chunk_indexes) == 3  # one message per chunk
