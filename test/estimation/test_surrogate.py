@@ -73,6 +73,22 @@ def test_direct_physics_beyond_the_tables_extends_as_they_do() -> None:
     np.testing.assert_allclose(value, tables.evaluate(far)[0], rtol=0.02)
 
 
+def test_beyond_the_tables_the_derivative_is_that_of_the_power_law() -> None:
+    """Beyond 3x the largest load both models extend a power law F^n from their last load;
+    the derivative they give the filter's Jacobian is that law's, n value / F, at the load
+    asked for (pinned by a central difference, exact for a power law). A mutation review
+    found the naive reference's derivative unguarded there (divided by its edge load instead,
+    67 times too steep at 200x)."""
+    preset = load_preset("dong2022-downhole")
+    args = (preset, Misalignment(), 0.0, LoadingCase.SCREW_TENSION_NUT_COMPRESSION)
+    far, step = 200.0 * preset.largest_axial_load_n, 10.0
+    for model in (DirectPhysics(*args), averaged_tables(*args)):
+        value, slope = model.evaluate(far)
+        above, below = model.evaluate(far + step)[0], model.evaluate(far - step)[0]
+        assert value.all()
+        np.testing.assert_allclose(slope, (above - below) / (2.0 * step), rtol=1e-6)
+
+
 def test_a_jammed_roller_slides_with_many_times_the_rolling_torque() -> None:
     """Paper 002: r = jammed / rolling torque of one roller is far above 1 (60-90 here)."""
     averages = physics_averages(load_preset("li2020-jamming"), [15e3])
