@@ -45,6 +45,27 @@ def test_a_jam_in_motion_has_evidence_and_one_at_standstill_without_ripple_has_n
     assert at_standstill < 5.0
 
 
+def test_the_evidence_for_an_onset_ends_at_the_next_onset() -> None:
+    """Each onset's LLR sums the blocks up to the next onset when that comes before the
+    window ends (evidence.py's docstring): with onsets 0.6 s apart an 8 s window gives the
+    first onset what a window of exactly the gap gives it (20.1 nats; 91.2 if it ran on past
+    the second jam). A mutation review found the cut unguarded (the tests' onsets lie 10.5 s
+    apart, beyond their window)."""
+    jams = [{"time_s": 2.0, "roller": 3}, {"time_s": 2.6, "roller": 7}]
+    scene = scene_from_mapping(downhole(duration_s=3.5, jams=jams))
+    result = simulate(scene)
+    onsets = result.truth.jam_onsets
+    stamps = result.truth.stamp_s[onsets].tolist()
+    counts = result.truth.jammed_rollers[onsets].tolist()
+    params = EstimatorParams(actuator=scene.actuator, model=ModelParams(radial_load_ratio=0.15))
+    long_window = onset_evidence(params, result.motor, stamps, counts, window_s=8.0)
+    to_the_next = onset_evidence(
+        params, result.motor, stamps, counts, window_s=stamps[1] - stamps[0]
+    )
+    assert long_window[0] == pytest.approx(to_the_next[0], rel=1e-12)
+    assert long_window[0] > 0.0
+
+
 def test_onset_evidence_refuses_inconsistent_onsets() -> None:
     scene = scene_from_mapping(downhole(duration_s=2.0))
     samples = simulate(scene).motor
