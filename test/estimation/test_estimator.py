@@ -389,6 +389,15 @@ def test_a_clock_reset_starts_one_load_transition_not_one_per_block() -> None:
     assert transition == [i % 50 < 25 for i in range(100)]
 
 
+def at_rest(rng: np.random.Generator, t0: float, t1: float) -> MotorSamples:
+    """Samples at 1 kHz from ``t0`` to ``t1`` of a motor standing still (noisy speed,
+    current near 3 A)."""
+    t = np.arange(t0, t1, 1e-3)
+    return MotorSamples(
+        t, 3.0 + rng.normal(0.0, 0.05, len(t)), rng.normal(0.0, 0.2, len(t)), np.zeros(len(t))
+    )
+
+
 def hole_reinitialisations(samples: MotorSamples, *, merge: bool) -> list[bool]:
     """``keep_load`` of each load re-initialisation while estimating ``samples``."""
     estimator = HealthEstimator(
@@ -414,16 +423,22 @@ def test_a_hole_inside_a_standstill_reacquires_the_load_merged_or_not() -> None:
     """A silence of several blocks at standstill forgets the load's derivatives whether the
     standstill's blocks are merged or not."""
     rng = np.random.default_rng(1)
-
-    def rest(t0: float, t1: float) -> MotorSamples:
-        t = np.arange(t0, t1, 1e-3)
-        return MotorSamples(
-            t, 3.0 + rng.normal(0.0, 0.05, len(t)), rng.normal(0.0, 0.2, len(t)), np.zeros(len(t))
-        )
-
-    samples = MotorSamples.concatenate([rest(0.0, 1.0), rest(1.3, 3.0)])  # a 0.3 s hole
+    samples = MotorSamples.concatenate([at_rest(rng, 0.0, 1.0), at_rest(rng, 1.3, 3.0)])  # a hole
     assert hole_reinitialisations(samples, merge=True) == [True]
     assert hole_reinitialisations(samples, merge=False) == [True]
+
+
+def test_a_merged_standstill_estimate_stands_for_the_blocks_covering_its_duration() -> None:
+    """With merged standstill blocks each estimate stands for the fewest whole blocks that
+    cover fidelity.standstill_block_s (Fidelity's docstring: one update per 0.5 s): 13 blocks
+    of 40 ms, 520 samples at 1 kHz, not 14. A mutation review found the count unguarded."""
+    params = EstimatorParams(actuator=scene_from_mapping(downhole()).actuator)
+    assert (params.fidelity.standstill_block_s, params.filter.block_duration_s) == (0.5, 0.04)
+    estimator = HealthEstimator(params)
+    states = estimator.process(at_rest(np.random.default_rng(2), 0.0, 3.0))
+    accepted = [0] + [state.samples_accepted for state in states]
+    assert all(state.event is EstimateEvent.STANDSTILL for state in states)
+    assert len(states) == 5 and set(np.diff(accepted)) == {520}
 
 
 def test_maintenance_resets_the_count_and_only_what_was_replaced() -> None:
