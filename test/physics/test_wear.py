@@ -86,6 +86,18 @@ def test_critical_elastic_area_satisfies_eq_8_to_10() -> None:
     assert s.plastic_area_m2 < s.elastoplastic_area_m2 < s.elastic_area_m2
 
 
+def test_hardness_coefficient_is_001s_with_the_mean_poisson_ratio() -> None:
+    """K = 0.454 + 0.41 nu (001 after eq. 10; docs/physics.md: nu the mean of screw and
+    roller): 0.5729 for the preset's nu = 0.29, 0.577 for 0.25 and 0.35. A mutation review
+    found it unguarded: the eq. 8-10 test reads K back from the surface, and the 30 kN rate
+    moves only 4 % with K = 0.454 + 0.41 (nu_s + nu_r), inside its 10 % window."""
+    assert SURFACE.hardness_coefficient == pytest.approx(0.454 + 0.41 * 0.29, rel=1e-12)
+    screw = dataclasses.replace(GEOMETRY.screw, poisson_ratio=0.25)
+    roller = dataclasses.replace(GEOMETRY.roller, poisson_ratio=0.35)
+    mixed = fractal_surface(screw, roller, WEAR.surface_roughness_ra_m)
+    assert mixed.hardness_coefficient == pytest.approx(0.454 + 0.41 * 0.3, rel=1e-12)
+
+
 def _asperity_force_n(a: float) -> float:
     """Eq. 12, regime chosen by the critical areas of eq. 10-11."""
     s = SURFACE
@@ -193,6 +205,24 @@ def test_archard_rate_is_004_eq_34_with_roller_lead() -> None:
     assert precision_loss_rate_m_per_s(GEOMETRY, archard, loads, speed) == pytest.approx(
         expected.sum(), rel=1e-12
     )
+
+
+@pytest.mark.parametrize("body", ["screw", "roller"])
+def test_the_softer_body_sets_the_hardness_of_both_wear_laws(body: str) -> None:
+    """H is the softer body's hardness (docs/physics.md, 004 eq. 34 and 001's fractal
+    surface): halving either body's hardness doubles the Archard rate and halves the fully
+    plastic area's H. A mutation review found it unguarded (every preset's bodies are equally
+    hard)."""
+    softer = dataclasses.replace(
+        getattr(GEOMETRY, body), hardness_pa=0.5 * getattr(GEOMETRY, body).hardness_pa
+    )
+    geometry = dataclasses.replace(GEOMETRY, **{body: softer})
+    loads, archard = synthetic_loads(30e3), with_model("archard")
+    assert precision_loss_rate_m_per_s(geometry, archard, loads, 0.07) == pytest.approx(
+        2.0 * precision_loss_rate_m_per_s(GEOMETRY, archard, loads, 0.07), rel=1e-12, abs=0.0
+    )
+    surface = fractal_surface(geometry.screw, geometry.roller, WEAR.surface_roughness_ra_m)
+    assert surface.hardness_pa == softer.hardness_pa
 
 
 def test_fractal_rate_is_001_eq_34() -> None:
