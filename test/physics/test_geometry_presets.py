@@ -28,6 +28,27 @@ def test_004_helix_angles_match_table_2() -> None:
     assert geometry.roller_helix_angle_rad == pytest.approx(0.0907, abs=5e-5)
 
 
+@pytest.mark.parametrize("flank_deg", [30.0, 40.0, 60.0])
+def test_the_contact_normal_is_a_unit_vector_at_the_flank_angle(flank_deg: float) -> None:
+    """The contact normal has the axial component sin(beta) cos(lambda_r) (004 eq. 18) and
+    the radial component cos(beta) (000 eq. 12), the rest sin(beta) sin(lambda_r) along the
+    helix (docs/physics.md): a unit vector whose axial-to-radial ratio is tan(beta)
+    cos(lambda_r). The presets all use beta = 45 deg, where sin and cos coincide; a mutation
+    review found either projection could swap them unseen."""
+    beta = math.radians(flank_deg)
+    geometry = dataclasses.replace(
+        load_preset("meng2022-misalignment").geometry, flank_angle_rad=beta
+    )
+    helix = geometry.roller_helix_angle_rad
+    along_helix = math.sin(beta) * math.sin(helix)
+    assert math.hypot(
+        geometry.axial_projection, geometry.radial_projection, along_helix
+    ) == pytest.approx(1.0, rel=1e-12)
+    assert geometry.axial_projection / geometry.radial_projection == pytest.approx(
+        math.tan(beta) * math.cos(helix), rel=1e-12
+    )
+
+
 @pytest.mark.parametrize(
     ("field", "value"),
     [
