@@ -72,6 +72,27 @@ def test_merging_equals_filterpy_imm_state_estimate_and_fresh_jams_are_born() ->
     assert math.exp(born[1].log_prob) == pytest.approx(0.6 * p_jump, rel=1e-12)
 
 
+def merged_once(members: list[tuple[float, float, float]], components: int) -> list[Hypothesis]:
+    """Count-1 hypotheses given as (load, load standard deviation, log probability), the
+    first established and the others fresh, after one merge without time passing (at most
+    ``components`` Gaussians per count): the established ones, sorted by load."""
+    p = dataclasses.replace(
+        params(prune_hypotheses=False),
+        filter=dataclasses.replace(params().filter, components_per_count=components),
+    )
+    bank = JamHypotheses(p, TorqueModel(p))
+    dim = bank.hypotheses[0].filter.dim_x
+    bank.hypotheses = []
+    for i, (load_n, load_std_n, log_prob) in enumerate(members):
+        x = np.zeros(dim)
+        x[LOAD] = load_n
+        covariance = np.eye(dim) * 1e4
+        covariance[LOAD, LOAD] = load_std_n**2
+        bank.hypotheses.append(Hypothesis(1, bank._new_filter(x, covariance), log_prob, i > 0))
+    bank._merge(0.0)
+    return sorted((h for h in bank.hypotheses if not h.fresh), key=lambda h: h.filter.x[LOAD])
+
+
 def test_a_count_keeps_apart_what_lies_far_apart() -> None:
     """Hypotheses of one count whose loads differ by more than merge_distance_sigmas stay
     separate Gaussians, at most components_per_count of them; what would exceed that joins
@@ -81,23 +102,8 @@ def test_a_count_keeps_apart_what_lies_far_apart() -> None:
     log_probs["beyond_b"] = math.log(0.1)
 
     def merged(components: int, names: list[str]) -> list[Hypothesis]:
-        p = dataclasses.replace(
-            params(prune_hypotheses=False),
-            filter=dataclasses.replace(params().filter, components_per_count=components),
-        )
-        bank = JamHypotheses(p, TorqueModel(p))
-        dim = bank.hypotheses[0].filter.dim_x
-        bank.hypotheses = []
-        for name in names:
-            x = np.zeros(dim)
-            x[LOAD] = loads_n[name]
-            covariance = np.eye(dim) * 1e4
-            covariance[LOAD, LOAD] = 500.0**2
-            bank.hypotheses.append(
-                Hypothesis(1, bank._new_filter(x, covariance), log_probs[name], name != "a")
-            )
-        bank._merge(0.0)
-        return sorted((h for h in bank.hypotheses if not h.fresh), key=lambda h: h.filter.x[LOAD])
+        assert names[0] == "a"
+        return merged_once([(loads_n[n], 500.0, log_probs[n]) for n in names], components)
 
     def expected_load(names: list[str]) -> float:
         weights = np.exp([log_probs[n] for n in names])
@@ -126,6 +132,22 @@ def moving_block(torque_nm: float, rng: np.random.Generator) -> Block:
         carrier_sin=math.sin(angle),
         direction=int(rng.choice([-1, 0, 1])),
     )
+
+
+@pytest.mark.parametrize("first_std_n", [300.0, 400.0])
+def test_the_merge_distance_weighs_the_load_difference_by_both_variances(
+    first_std_n: float,
+) -> None:
+    """Two loads 1.3 kN apart with standard deviations 300 N and 400 N lie 2.6 sigma apart
+    over the sum of their variances (hypotheses._load_distance2), within the default
+    merge_distance_sigmas of 3: one Gaussian, whichever is the more probable. A mutation
+    review found the second variance unguarded (over the first alone: 4.3 or 3.25 sigma,
+    kept apart)."""
+    assert params().filter.merge_distance_sigmas == 3.0
+    other_std_n = 700.0 - first_std_n
+    members = [(40e3, first_std_n, math.log(0.6)), (41.3e3, other_std_n, math.log(0.4))]
+    (single,) = merged_once(members, components=2)
+    assert single.filter.x[LOAD] == pytest.approx(0.6 * 40e3 + 0.4 * 41.3e3, rel=1e-12)
 
 
 @pytest.mark.parametrize("kind", ["ekf", "ukf"])
@@ -242,6 +264,26 @@ def test_an_established_hypothesis_is_pruned_at_a_lower_floor_than_a_fresh_one()
     ]
     bank._drop_unlikely()
     assert [(h.count, h.fresh) for h in bank.hypotheses] == [(0, False), (1, False)]
+
+
+def test_without_evidence_the_counts_follow_the_jam_rate_and_all_jammed_keeps_its_share() -> None:
+    """With no reweighting the counts are a Poisson process at model.jam_rate_per_h (module
+    docstring, step 1): from certain N - 1 jammed rollers, N - 1 keeps exp(-rate t) and N,
+    which has no count to jump to, keeps all it gets. A mutation review found the last count's
+    share unguarded (it also paid the jump probability, 0.34 instead of 0.22 after 1.5 s)."""
+    p = params(prune_hypotheses=True)
+    assert p.model.jam_rate_per_h == 3600.0  # one jam a second
+    bank = JamHypotheses(p, TorqueModel(p))
+    bank.reset_count(bank.n_rollers - 1)
+    rng = np.random.default_rng(3)
+    for step in range(1, 4):
+        block = dataclasses.replace(
+            moving_block(4.0, rng), duration_s=0.5, direction=1, motor_speed_rad_s=150.0
+        )
+        bank.step(block, jerk_psd=5e12, evidence=False)
+        probabilities = bank.probabilities()
+        assert probabilities[-2] == pytest.approx(math.exp(-0.5 * step), rel=1e-12)
+        assert probabilities[-1] == pytest.approx(-math.expm1(-0.5 * step), rel=1e-12)
 
 
 @pytest.mark.parametrize("iterations", [0, hypotheses.MAX_ITERATIONS])
