@@ -19,7 +19,11 @@ from prsm_health.benchmark import (
     two_jam_scenes,
 )
 from prsm_health.estimation.estimate import EstimateEvent, HealthState
-from prsm_health.estimation.estimator import GATED_BLOCKS_BEFORE_RESET, HealthEstimator
+from prsm_health.estimation.estimator import (
+    GATED_BLOCKS_BEFORE_RESET,
+    REACQUIRE_S,
+    HealthEstimator,
+)
 from prsm_health.estimation.inputs import Block, RejectReason
 from prsm_health.estimation.measurement import TorqueModel
 from prsm_health.estimation.metrics import Metrics, score
@@ -389,13 +393,14 @@ def test_a_clock_reset_starts_one_load_transition_not_one_per_block() -> None:
     assert transition == [i % 50 < 25 for i in range(100)]
 
 
-def at_rest(rng: np.random.Generator, t0: float, t1: float) -> MotorSamples:
-    """Samples at 1 kHz from ``t0`` to ``t1`` of a motor standing still (noisy speed,
-    current near 3 A)."""
+def steady_samples(
+    rng: np.random.Generator, t0: float, t1: float, speed_rad_s: float = 0.0
+) -> MotorSamples:
+    """Samples at 1 kHz from ``t0`` to ``t1`` of a motor standing still, or turning at
+    ``speed_rad_s`` (noisy speed, current near 3 A)."""
     t = np.arange(t0, t1, 1e-3)
-    return MotorSamples(
-        t, 3.0 + rng.normal(0.0, 0.05, len(t)), rng.normal(0.0, 0.2, len(t)), np.zeros(len(t))
-    )
+    speed = speed_rad_s + rng.normal(0.0, 0.2, len(t))
+    return MotorSamples(t, 3.0 + rng.normal(0.0, 0.05, len(t)), speed, speed_rad_s * t)
 
 
 def hole_reinitialisations(samples: MotorSamples, *, merge: bool) -> list[bool]:
@@ -423,7 +428,10 @@ def test_a_hole_inside_a_standstill_reacquires_the_load_merged_or_not() -> None:
     """A silence of several blocks at standstill forgets the load's derivatives whether the
     standstill's blocks are merged or not."""
     rng = np.random.default_rng(1)
-    samples = MotorSamples.concatenate([at_rest(rng, 0.0, 1.0), at_rest(rng, 1.3, 3.0)])  # a hole
+    # a 0.3 s hole
+    samples = MotorSamples.concatenate(
+        [steady_samples(rng, 0.0, 1.0), steady_samples(rng, 1.3, 3.0)]
+    )
     assert hole_reinitialisations(samples, merge=True) == [True]
     assert hole_reinitialisations(samples, merge=False) == [True]
 
@@ -435,10 +443,37 @@ def test_a_merged_standstill_estimate_stands_for_the_blocks_covering_its_duratio
     params = EstimatorParams(actuator=scene_from_mapping(downhole()).actuator)
     assert (params.fidelity.standstill_block_s, params.filter.block_duration_s) == (0.5, 0.04)
     estimator = HealthEstimator(params)
-    states = estimator.process(at_rest(np.random.default_rng(2), 0.0, 3.0))
+    states = estimator.process(steady_samples(np.random.default_rng(2), 0.0, 3.0))
     accepted = [0] + [state.samples_accepted for state in states]
     assert all(state.event is EstimateEvent.STANDSTILL for state in states)
     assert len(states) == 5 and set(np.diff(accepted)) == {520}
+
+
+def test_after_a_hole_in_motion_jam_evidence_waits_while_the_load_is_found_again() -> None:
+    """After a hole (more than HOLE_BLOCKS blocks without a sample) the blocks of the next
+    REACQUIRE_S = 0.25 s are filtered without jam evidence (estimator.py: a load that moved
+    inside the hole would look like a jam), as after a time reset. A mutation review found
+    the hole's blind window unguarded."""
+    estimator = HealthEstimator(EstimatorParams(actuator=scene_from_mapping(downhole()).actuator))
+    weighed: list[tuple[float, bool]] = []
+    step = estimator._bank.step
+
+    def recorded(block: Block, **options: Any) -> Any:
+        weighed.append((block.stamp_s, options["evidence"]))
+        return step(block, **options)
+
+    estimator._bank.step = recorded  # type: ignore[method-assign]
+    rng = np.random.default_rng(4)
+    hole_end = 1.3  # a 0.3 s hole
+    estimator.process(
+        MotorSamples.concatenate(
+            [steady_samples(rng, 0.0, 1.0, 150.0), steady_samples(rng, hole_end, 2.0, 150.0)]
+        )
+    )
+    after = [(stamp, evidence) for stamp, evidence in weighed if stamp > hole_end]
+    blind_until = after[0][0] + REACQUIRE_S
+    assert [evidence for _, evidence in after] == [stamp > blind_until for stamp, _ in after]
+    assert sum(not evidence for _, evidence in after) == 7  # the first and 0.25 s after it
 
 
 def test_maintenance_resets_the_count_and_only_what_was_replaced() -> None:
