@@ -37,8 +37,8 @@ def test_the_wear_coefficient_adds_its_log_normal_spread_to_the_loss() -> None:
     integrator = DegradationIntegrator(wear_coefficient_sigma_ln=0.5, radial_relative_sensitivity=0)
     integrator.add(2.0, [1.0], [prediction(3e-9)], [0.0])
     loss = integrator.state.precision_loss_m
-    assert loss == pytest.approx(6e-9, rel=1e-12)
-    assert integrator.precision_loss_std_m == pytest.approx(0.60394 * loss, rel=1e-4)
+    assert loss == pytest.approx(6e-9, rel=1e-12, abs=0.0)
+    assert integrator.precision_loss_std_m == pytest.approx(0.60394 * loss, rel=1e-4, abs=0.0)
 
 
 def test_an_undecided_jam_count_adds_the_spread_of_the_rates() -> None:
@@ -49,10 +49,10 @@ def test_an_undecided_jam_count_adds_the_spread_of_the_rates() -> None:
     rates = [prediction(1e-9, slope=1e-12), prediction(3e-9, slope=-1e-12)]
     integrator.add(2.0, [0.5, 0.5], rates, [1000.0, 1000.0])
     state = integrator.state
-    assert state.precision_loss_m == pytest.approx(4e-9, rel=1e-12)
-    assert state.jam_error_m == pytest.approx(2e-9, rel=1e-12)
-    assert state.load_error_m == pytest.approx(2e-9, rel=1e-12)
-    assert integrator.precision_loss_std_m == pytest.approx(4e-9, rel=1e-12)  # linear sum
+    assert state.precision_loss_m == pytest.approx(4e-9, rel=1e-12, abs=0.0)
+    assert state.jam_error_m == pytest.approx(2e-9, rel=1e-12, abs=0.0)
+    assert state.load_error_m == pytest.approx(2e-9, rel=1e-12, abs=0.0)
+    assert integrator.precision_loss_std_m == pytest.approx(4e-9, rel=1e-12, abs=0.0)  # linear sum
 
 
 def test_nothing_accrues_at_standstill_and_a_reset_keeps_what_was_not_replaced() -> None:
@@ -60,10 +60,10 @@ def test_nothing_accrues_at_standstill_and_a_reset_keeps_what_was_not_replaced()
     integrator.add(1.0, [1.0], [prediction(1e-9, damage_per_s=1e-6)], [0.0])
     integrator.stop()
     assert integrator.state.rate_m_per_s == 0.0
-    assert integrator.state.precision_loss_m == pytest.approx(1e-9)
+    assert integrator.state.precision_loss_m == pytest.approx(1e-9, rel=1e-12, abs=0.0)
     integrator.reset(precision_loss=True, fatigue_damage=False)
     assert integrator.precision_loss_std_m == integrator.state.precision_loss_m == 0.0
-    assert integrator.state.fatigue_damage == pytest.approx(1e-6)
+    assert integrator.state.fatigue_damage == pytest.approx(1e-6, rel=1e-12, abs=0.0)
 
 
 def test_the_load_mixture_carries_the_spread_between_the_counts() -> None:
