@@ -322,3 +322,123 @@ def test_configuration_status() -> None:
     status = configuration_status("parameter input_type: must be one of a, b", "left")
     assert (status.name, status.level, status.hardware_id) == (CONFIGURATION, Level.ERROR, "left")
     assert status.message == "configure failed: parameter input_type: must be one of a, b"
+
+
+#: 2**-17 m is 15625 / 2048 um, exact in binary: the precision-loss fractions below are exact.
+LOSS_M = 2.0**-17
+LOSS_UM = LOSS_M * 1e6
+
+
+@pytest.mark.parametrize(
+    ("name", "state_changes", "input_changes", "th", "events", "level"),
+    [
+        (AXIAL_LOAD, {"axial_load_n": 49_500.0}, {}, {}, None, Level.WARN),  # 0.9 of rated
+        (AXIAL_LOAD, {"axial_load_n": 60_500.0}, {}, {}, None, Level.ERROR),  # 1.1 of rated
+        (
+            JAMMED_ROLLERS,
+            {"jam_probabilities": (0.75, 0.25, 0.0)},
+            {},
+            {"jam_warn_probability": 0.25},
+            None,
+            Level.WARN,
+        ),
+        (
+            PRECISION_LOSS,
+            {"precision_loss_m": LOSS_M},
+            {},
+            {"precision_loss_budget_um": 2 * LOSS_UM, "precision_loss_warn_fraction": 0.5},
+            None,
+            Level.WARN,
+        ),
+        (
+            PRECISION_LOSS,
+            {"precision_loss_m": LOSS_M},
+            {},
+            {"precision_loss_budget_um": LOSS_UM},
+            None,
+            Level.ERROR,
+        ),
+        (FATIGUE, {"fatigue_damage": 0.5}, {}, {}, None, Level.WARN),
+        (FATIGUE, {"fatigue_damage": 0.9}, {}, {}, None, Level.ERROR),
+        (INPUT_HEALTH, {}, {"rate_hz": 100.0}, {}, None, Level.OK),  # not below the minimum
+        (
+            INPUT_HEALTH,
+            {},
+            {"recent_rejected_fraction": 0.05, "recent_rejected": {"spike": 5}},
+            {},
+            None,
+            Level.WARN,
+        ),
+        (INPUT_HEALTH, {}, {}, {"rejected_warn_fraction": 0.0}, None, Level.OK),  # none rejected
+        (INPUT_HEALTH, {}, {"stamp_rate": 100.0}, {}, None, Level.OK),
+        (INPUT_HEALTH, {}, {"stamp_rate": 0.01}, {}, None, Level.OK),
+        (INPUT_HEALTH, {}, {"stamp_rate": 0.0}, {}, None, Level.WARN),  # stamps standing still
+        (
+            FILTER_CONSISTENCY,
+            {},
+            {},
+            {},
+            FilterEvents(last_warning_s=NOW - 10.0, last_warning="w"),
+            Level.WARN,
+        ),
+        (FATIGUE, {}, {"last_sample_s": NOW - 1.0}, {}, None, Level.OK),  # as old as the timeout
+        (FATIGUE, {}, {"rejecting_since_s": NOW - 1.0}, {}, None, Level.OK),
+    ],
+    ids=[
+        "load-warn",
+        "load-error",
+        "jam-warn",
+        "precision-warn",
+        "precision-error",
+        "fatigue-warn",
+        "fatigue-error",
+        "min-rate",
+        "rejected-warn",
+        "rejected-none",
+        "stamp-rate-high",
+        "stamp-rate-low",
+        "stamp-rate-zero",
+        "recent-warning",
+        "stale-timeout",
+        "rejecting-timeout",
+    ],
+)
+def test_each_threshold_is_met_at_its_value(
+    name: str,
+    state_changes: dict[str, object],
+    input_changes: dict[str, object],
+    th: dict[str, float],
+    events: FilterEvents | None,
+    level: Level,
+) -> None:
+    """Pins each documented limit at its exact value (levels at or above a threshold, rates
+    below the minimum, stamp rates outside [0.01, 100] per second, 10 s of recent events, STALE
+    older than the timeout): a mutation review found every one of these edges unguarded."""
+    got = statuses(
+        state(**state_changes), inputs(**input_changes), DiagnosticThresholds(**th), events
+    )
+    assert got[name][0] == level, got[name][1]
+
+
+def test_messages_state_the_values_in_their_units() -> None:
+    """Pins the load in kN, the precision loss in um and its rate in um per hour, the damage
+    and its levels, as the status messages word them: a mutation review found them
+    unguarded (the load in tenths of a kN and the rate per second passed)."""
+    got = statuses()
+    assert got[AXIAL_LOAD][1] == "20.0 ± 0.15 kN (1 sigma), 36 % of rated 55 kN"
+    assert got[PRECISION_LOSS][1] == "2 um of the 50 um budget (3.6 um/h)"
+    assert got[PRECISION_LOSS][2]["precision_loss_rate_um_per_h"] == "3.6"
+    assert got[FATIGUE][1] == "Miner damage 0.01 (warn 0.5, error 0.9)"
+
+
+def test_counts_are_published_whole() -> None:
+    """Pins that counts go out as integers, all their digits, beyond the six significant
+    digits that other values get: a mutation review found it unguarded (12345678 received
+    went out as 1.23457e+07)."""
+    many = inputs(received=12_345_678, accepted=12_345_670, rejected={"spike": 8})
+    events = FilterEvents(gaps=1_000_001)
+    got = statuses(i=many, events=events)
+    assert got[INPUT_HEALTH][2]["received"] == "12345678"
+    assert got[INPUT_HEALTH][2]["accepted"] == "12345670"
+    assert got[FILTER_CONSISTENCY][2]["gaps"] == "1000001"
+    assert got[INPUT_HEALTH][2]["rate_hz"] == "1000"
