@@ -200,3 +200,33 @@ def test_diagnostics_tracker_gives_the_statuses() -> None:
     assert ("rated_load_n", "55000") in by_name[STATUS_NAMES[0]].values
     assert ("rejected_spike", "5") in by_name[INPUT_HEALTH].values
     assert by_name[FILTER_CONSISTENCY].message == "processing error: boom"
+
+
+def test_rejections_a_window_old_are_out_of_it() -> None:
+    """Pins that the rejected fraction covers the rate's window, (now - 1 s, now]: samples
+    judged exactly 1 s ago are out of both. A mutation review found it unguarded (kept, they
+    made the fraction 50 % where none of the last second's samples was rejected)."""
+    tracker = InputTracker()
+    tracker.update(0.0, 100, accepted=0, rejected={"spike": 100})
+    tracker.update(0.5, 100, accepted=100, rejected={"spike": 100})
+    health = tracker.health(1.0)
+    assert health.rate_hz == pytest.approx(100.0)
+    assert (health.recent_rejected_fraction, health.recent_rejected) == (0.0, {})
+
+
+def stamps_every_10_ms(tracker: InputTracker, moves: int) -> None:
+    """``moves`` updates 10 ms apart on both clocks, 10 samples accepted each."""
+    for i in range(moves):
+        tracker.update(i / 100, 10, 10 * (i + 1), {}, input_clock_s=5.0 + i / 100)
+
+
+def test_a_burst_of_moves_shorter_than_half_the_window_gives_no_stamp_rate() -> None:
+    """Pins that the stamps' rate needs its moves to span half the window: 20 moves over
+    0.19 s are no rate yet, 61 over 0.6 s are. A mutation review found the span check
+    unguarded (dropped, a burst after a start or a reset gave a rate from 0.19 s)."""
+    burst = InputTracker()
+    stamps_every_10_ms(burst, 20)
+    assert burst.health(0.19).stamp_rate == -1.0
+    longer = InputTracker()
+    stamps_every_10_ms(longer, 61)
+    assert longer.health(0.6).stamp_rate == pytest.approx(1.0)
