@@ -122,3 +122,27 @@ def test_a_state_file_that_is_a_directory_or_under_a_file_is_refused(tmp_path: P
     a_file.write_text("")
     with pytest.raises(ConfigError, match=rf"state_file: {a_file} is not a directory"):
         node_config(values(state_file=str(a_file / "state.json")))
+
+
+def test_every_range_includes_its_bounds() -> None:
+    """Pins that each bounded parameter takes both of its bounds, as --help and docs/ros.md
+    print them ([low, high]), and refuses what lies past them. A mutation review found the
+    upper bound unguarded (health_rate_hz 1000 refused)."""
+    for spec in PARAMETERS:
+        if spec.bounds is None:
+            continue
+        kind = type(spec.default)
+        low, high = (kind(bound) for bound in spec.bounds)
+        assert spec.problem(low) is None and spec.problem(high) is None, spec.name
+        step = 1 if kind is int else high * 1e-9
+        assert spec.problem(high + step) == f"must be in [{low:g}, {high:g}], got {high + step!r}"
+
+
+def test_a_joint_state_effort_is_divided_by_k_t_only_when_it_is_a_torque() -> None:
+    """Pins effort_is: a current is used as it is, a torque divided by the drive train's k_t.
+    A mutation review found the current case unguarded (divided by k_t as well, the estimates
+    of a JointState carrying currents were off by 1/k_t)."""
+    assert node_config(values(effort_is="current")).effort_torque_constant_nm_per_a is None
+    config = node_config(values(effort_is="torque"))
+    k_t = config.estimator.actuator.drive_train.torque_constant_nm_per_a
+    assert config.effort_torque_constant_nm_per_a == k_t > 0.0
