@@ -74,6 +74,23 @@ def test_model_table_is_readable(capsys: pytest.CaptureFixture[str]) -> None:
     assert len(out.splitlines()) == 7 + 10
 
 
+def test_model_table_at_standstill_has_no_fatigue_life(capsys: pytest.CaptureFixture[str]) -> None:
+    """Pins the table's fatigue life at 0 rpm: none, as nothing rolls over (not "inf h"). A
+    mutation review found it unguarded."""
+    code, out, _ = run(
+        capsys,
+        "model",
+        "--preset",
+        "dong2022-downhole",
+        "--axial-load",
+        "20000",
+        "--speed-rpm",
+        "0",
+    )
+    assert code == 0
+    assert "  fatigue life                      - (no rotation)" in out.splitlines()
+
+
 @pytest.mark.parametrize(
     "argv",
     [
