@@ -208,12 +208,36 @@ def test_simulate_says_which_jams_a_shortened_run_leaves_out(
 ) -> None:
     """sudden-jam's jams at 4.5 s and 25 s: a 10 s run has the first only, and says so (a
     --duration or a scene file that put a jam beyond the end left it out without a word)."""
-    argv = ["simulate", "--scene", "sudden-jam", "--duration", "10", "--rate", "100"]
+    err, jammed = simulate_sudden_jam(tmp_path, capsys, "10")
+    assert err.endswith(
+        "note: the jam(s) at 25 s come after the end of the run (10 s): not simulated\n"
+    )
+    assert jammed == 1
+
+
+def test_a_jam_at_the_end_of_the_run_is_left_out_and_named(
+    tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    """Pins that a jam at the run's very end counts as after it: a 4.5 s run has its last
+    sample before sudden-jam's jam at 4.5 s, so neither jam is simulated, and the note names
+    both. A mutation review found it unguarded ('>' left the 4.5 s jam out without a word)."""
+    err, jammed = simulate_sudden_jam(tmp_path, capsys, "4.5")
+    assert err.endswith(
+        "note: the jam(s) at 4.5 s, 25 s come after the end of the run (4.5 s): not simulated\n"
+    )
+    assert jammed == 0
+
+
+def simulate_sudden_jam(
+    tmp_path: Path, capsys: pytest.CaptureFixture[str], duration: str
+) -> tuple[str, int]:
+    """sudden-jam (jams at 4.5 s and 25 s) simulated at 100 Hz for ``duration`` seconds: what
+    it wrote on stderr, and the most rollers its truth shows jammed."""
+    argv = ["simulate", "--scene", "sudden-jam", "--duration", duration, "--rate", "100"]
     assert main([*argv, "--out", str(tmp_path / "short")]) == 0
-    note = "note: the jam(s) at 25 s come after the end of the run (10 s): not simulated\n"
-    assert capsys.readouterr().err.endswith(note)
     truth = read_truth(tmp_path / "short")
-    assert truth is not None and int(truth.jammed_rollers.max()) == 1
+    assert truth is not None
+    return capsys.readouterr().err, int(truth.jammed_rollers.max())
 
 
 def test_ctrl_c_during_simulate_leaves_a_complete_shorter_bag(tmp_path: Path) -> None:
