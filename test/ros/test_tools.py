@@ -39,7 +39,7 @@ from prsm_health.ros.monitor import (
     diagnostics_record,
     table,
 )
-from prsm_health.ros.player import ACK_TIMEOUT_S
+from prsm_health.ros.player import ACK_TIMEOUT_S, CLOCK_RATE_RANGE, RATE_RANGE, PlayOptions
 from prsm_health.ros.tools import DEMO_BAG
 from prsm_health.signals import MotorSamples
 from test.bags.samples import streamed_messages
@@ -520,6 +520,22 @@ def test_monitor_refuses_an_invalid_node_name() -> None:
         "prsm-health: error: --node 'bad name' is not a node name such as /prsm_health:"
         " must not contain characters other than alphanumerics, '_', or '/'\n"
     )
+
+
+def test_play_takes_the_bounds_of_its_rates() -> None:
+    """Pins that --rate and --clock-rate take both bounds their error message names (within
+    0.001 .. 1e+06, 0.01 .. 1e+09). A mutation review found them unguarded (exclusive bounds
+    refused --rate 1e6)."""
+    for rate in RATE_RANGE:
+        assert PlayOptions(rate=rate).rate == rate
+    for clock_rate in CLOCK_RATE_RANGE:
+        assert PlayOptions(clock=True, clock_rate_hz=clock_rate).clock_rate_hz == clock_rate
+
+
+def test_monitor_takes_a_node_name_with_a_trailing_slash() -> None:
+    """Pins that --node prsm_health/ listens to /prsm_health/health. A mutation review found
+    the trailing slash's removal unguarded (kept, the name was refused as invalid)."""
+    assert MonitorOptions(node="prsm_health/").health_topic == "/prsm_health/health"
 
 
 def test_monitor_says_what_was_missing(ros: None) -> None:
