@@ -401,6 +401,35 @@ def test_cli_checks_output_paths_before_the_replay_and_makes_the_metrics_folder(
     assert json.loads(metrics.read_text())["jams"]
 
 
+@pytest.mark.parametrize(
+    ("outer", "inner"),
+    [("--out", "--report"), ("--report", "--out"), ("--report", "--metrics-json")],
+)
+def test_cli_refuses_an_output_inside_another(
+    bag: Path, tmp_path: Path, capsys: pytest.CaptureFixture[str], outer: str, inner: str
+) -> None:
+    """Pins that an output inside another one's path is refused before the replay, whichever
+    option names the outer one (the options are compared in a fixed order, so both nestings
+    occur). A mutation review found the nesting unguarded: only equal paths were tested."""
+    paths = {outer: tmp_path / "outer", inner: tmp_path / "outer" / "inner"}
+    assert main(["replay", str(bag), *(str(v) for kv in paths.items() for v in kv)]) == 2
+    captured = capsys.readouterr()
+    assert captured.out == "", "refused before replaying"
+    first, second = sorted(paths, key=["--out", "--report", "--metrics-json"].index)
+    assert f"{second}: {paths[second]} overlaps {first} {paths[first]}" in captured.err
+
+
+def test_cli_writes_the_report_into_an_existing_folder(
+    bag: Path, tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    """Pins that --report takes a folder that exists (only a file there is refused). A
+    mutation review found it unguarded (an existing report folder was refused)."""
+    report = tmp_path / "report"
+    report.mkdir()
+    assert main(["replay", str(bag), "--report", str(report)]) == 0, capsys.readouterr().err
+    assert (report / "index.html").is_file()
+
+
 def test_cli_says_when_no_sample_matches_the_joint_name_and_what_is_skipped(
     bag: Path, tmp_path: Path, capsys: pytest.CaptureFixture[str]
 ) -> None:
