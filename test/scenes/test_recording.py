@@ -244,6 +244,18 @@ def test_a_bag_without_a_record_gets_no_node_params_and_no_play_note(
     assert "records no actuator" in capsys.readouterr().err and not out.exists()
 
 
+def test_play_has_no_wear_note_for_a_bag_whose_actuator_wears_at_its_own_rate(
+    renamed: Path, tmp_path: Path
+) -> None:
+    """Pins that play's note is for accelerated wear only: a bag recording an actuator without
+    wear_acceleration (x1, what the bundled parameters assume) gets none. A mutation review
+    found it unguarded (every recorded bag got "accelerates wear x1")."""
+    real_wear = copy_recording(renamed, tmp_path / "real-wear", "preset: dong2022-downhole\n")
+    scene = bag_actuator(real_wear)
+    assert scene is not None and scene.actuator.wear_acceleration == 1.0
+    assert accelerated_wear_note(real_wear) is None
+
+
 def test_node_params_names_a_record_that_builds_no_actuator(
     renamed: Path, tmp_path: Path, capsys: pytest.CaptureFixture[str]
 ) -> None:
