@@ -32,13 +32,22 @@ from prsm_health.cli import main
 from prsm_health.estimation.estimate import EstimateEvent
 from prsm_health.estimation.params import EstimatorParams
 from prsm_health.replay import ReplayResult, replay
-from prsm_health.report import _band, _estimates_span, _load_figure, _series, plt
+from prsm_health.report import (
+    PLOTS,
+    _band,
+    _estimates_span,
+    _load_figure,
+    _series,
+    plt,
+    write_report,
+)
 from prsm_health.ros.parameters import SPECS
 from prsm_health.scenes.recording import record
 from prsm_health.scenes.scene import load_scene, scene_from_mapping
 from prsm_health.scenes.simulator import Simulator
 from prsm_health.signals import MotorSamples
 from test.bags.samples import motor_samples, split_bag, write_bag
+from test.test_outputs import state
 
 BUNDLED_BAGS = Path(__file__).resolve().parents[1] / "bags"
 
@@ -701,6 +710,19 @@ def test_the_last_diagnostics_are_not_written_twice(bag: Path, tmp_path: Path) -
     assert np.all(np.diff(seconds) > 0.0), seconds
     # Once per second from the first piece's end, the last at the last piece's end.
     assert seconds == pytest.approx([0.498, 1.496, 2.494], abs=1e-9)
+
+
+def test_the_report_of_a_bag_without_truth_says_it_has_no_metrics(tmp_path: Path) -> None:
+    """Pins the index page of a report without truth: the three plots and a line saying the
+    bag has no ground truth, so no metrics (not an empty section). A mutation review found it
+    unguarded."""
+    states = [state(stamp_s=t) for t in (1.0, 2.0, 3.0)]
+    files = write_report(tmp_path / "report", states, None, None, title="field run")
+    assert [f.name for f in files] == [*PLOTS, "index.html"]
+    index = files[-1].read_text()
+    assert (
+        "<h2>Metrics</h2>\n<p>The bag has no ground truth (/truth/state): no metrics.</p>" in index
+    )
 
 
 def test_the_load_plot_shows_the_error_inside_its_band_when_there_is_truth(bag: Path) -> None:
