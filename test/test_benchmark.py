@@ -526,3 +526,43 @@ def test_a_plan_without_scene_runs_still_draws_its_pareto(tmp_path: Path) -> Non
     path = tmp_path / "pareto.png"
     benchmark_report.plot_pareto([], "Estimator configurations", path)
     assert path.stat().st_size > 0
+
+
+def table_under(text: str, heading: str) -> list[dict[str, str]]:
+    """The rows, by column, of the Markdown table after the line starting with ``heading``."""
+    after = text.split("\n" + heading, 1)[1].split("\n\n", 1)[1]
+    lines = after.split("\n\n", 1)[0].splitlines()
+    cells = [[c.strip() for c in re.split(r"(?<!\\)\|", line)[1:-1]] for line in lines]
+    header, _, *rows = cells
+    return [dict(zip(header, row, strict=True)) for row in rows]
+
+
+def test_the_tables_give_each_number_in_its_columns_unit(results: BenchResults) -> None:
+    """Pins the units of results.md: every run an hour at 1 kHz with a largest load error of
+    2.5 kN reads 3,600,000 samples and 2.50 kN per run, 3.6 M samples per scene and 2.5 kN
+    per configuration, and the false-jam floor counts its hours. A mutation review found
+    these unguarded (kN as N / 100, M samples as thousands, hours as minutes passed)."""
+    hour = 3_600_000
+    runs = [
+        dataclasses.replace(
+            r,
+            group="one-jam",
+            samples=hour,
+            metrics=dataclasses.replace(r.metrics, load_max_error_n=2_500.0),
+        )
+        for r in results.runs
+    ]
+    timed = dataclasses.replace(results, runs=runs)
+    text = markdown(timed, floors(timed))
+    every_run = table_under(text, "## Every full run")
+    assert len(every_run) == len(timed.runs_of())
+    for row in every_run:
+        assert (row["samples"], row["max err kN"]) == ("3,600,000", "2.50"), row
+    summary = table_under(text, "### Summary per configuration")
+    assert len(summary) == len({r.config for r in timed.runs_of()})
+    for row in summary:
+        assert row["samples"] == f"{3.6 * int(row['scenes']):.2f} M", row
+        assert row["max err kN"] == "2.5", row
+    default = len(timed.runs_of(config="default"))
+    (floor,) = [f for f in floors(timed) if f.name.startswith("no false second jam")]
+    assert f" over {default:.2f} h in {default} runs" in floor.measured
