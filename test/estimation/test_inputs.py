@@ -432,6 +432,30 @@ def test_a_block_of_one_sample_takes_its_acceleration_from_the_sample_before() -
         assert abs(block.motor_acceleration_rad_s2 - acceleration) < 5.0 * std
 
 
+def test_a_block_of_one_sample_takes_no_acceleration_across_a_gap_or_a_microsecond() -> None:
+    """The sample before must be on the same time line (not before a gap, where the speed
+    may have changed any way) and at least SHORTEST_SLOPE_SPAN_S earlier (a speed step over
+    2e-11 s is no acceleration of 5e12 rad/s^2): else the block has none, as before."""
+    gap = MotorSamples(
+        np.array([0.0, 0.02, 1.02]),  # a silence of 1 s, beyond filter.max_gap_s
+        np.array([5.0, 5.1, 5.2]),
+        np.array([100.0, 100.0, 200.0]),
+        np.array([0.0, 2.0, 150.0]),
+    )
+    close = MotorSamples(
+        np.array([0.0, 0.0399999999, 0.04000000001]),  # the last alone in the next cell
+        np.array([5.0, 5.1, 5.2]),
+        np.array([100.0, 100.0, 200.0]),
+        np.array([0.0, 4.0, 4.0]),
+    )
+    for samples in (gap, close):
+        blocks, _ = feed_in_chunks(samples, 3)
+        assert [b.samples for b in blocks] == [2, 1]
+        assert blocks[1].motor_acceleration_rad_s2 == 0.0
+        assert blocks[1].motor_acceleration_var_rad2_s4 == 0.0
+    assert feed_in_chunks(gap, 3)[0][1].after_gap
+
+
 # --- what numpy arrays can hold (adversarial fuzz, 2026-11) -----------------------------------
 def test_motor_samples_hold_float64_without_copying_float64_columns() -> None:
     """Built for every few samples in the node: float64 columns are kept as they are."""
