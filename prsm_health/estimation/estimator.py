@@ -101,17 +101,17 @@ class HealthEstimator:
                 rollers than the likeliest hypothesis has (nothing is changed then but the
                 pending estimates).
         """
-        self._check_count(jammed_rollers)
+        count = self._count(jammed_rollers)
         before = self.finish(end_of_data=False)
-        self._bank.assume_onset(int(jammed_rollers))
+        self._bank.assume_onset(count)
         return before
 
-    def _check_count(self, jammed_rollers: object) -> None:
-        """Refuse a jammed-roller count that is not an integer within 0..N (N: the preset's
-        rollers; :func:`require_integer`, which also refuses a bool: it indexed every
+    def _count(self, jammed_rollers: object) -> int:
+        """``jammed_rollers`` as an int, refused unless an integer within 0..N (N: the
+        preset's rollers; :func:`require_integer`, which also refuses a bool: it indexed every
         hypothesis at once). A numpy integer is a count like an int."""
         count = int(jammed_rollers) if isinstance(jammed_rollers, np.integer) else jammed_rollers
-        require_integer(count, "jammed_rollers", 0, self._bank.n_rollers)
+        return require_integer(count, "jammed_rollers", 0, self._bank.n_rollers)
 
     # --- persistence --------------------------------------------------------------------
     def snapshot(self) -> dict[str, Any]:
@@ -205,7 +205,7 @@ class HealthEstimator:
                 rollers), or a flag not a bool (the string "no" is true, and would reset what
                 was kept); nothing is done then.
         """
-        self._check_count(jammed_rollers)
+        count = self._count(jammed_rollers)
         flags = {
             "reset_precision_loss": reset_precision_loss,
             "reset_fatigue_damage": reset_fatigue_damage,
@@ -214,7 +214,7 @@ class HealthEstimator:
             if not isinstance(flag, bool):
                 raise ValueError(f"{name}: must be a bool, got {flag!r}")
         before = self.finish(end_of_data=False)  # more samples follow the maintenance
-        self._bank.reset_count(int(jammed_rollers))
+        self._bank.reset_count(count)
         self._nis.clear()  # the consistency before the maintenance says nothing about after
         self._gated_run = 0
         self._divergence_unsaid = False  # a recovery before it is no news after it
