@@ -255,8 +255,15 @@ def _rosbags_source(reader: Reader, topics: Collection[str], bag: Path) -> BagSo
         read = 0
         try:
             for connection, log_time_ns, raw in reader.messages(connections=played):
+                if not counts[connection.topic]:  # rosbags takes the counts of metadata.yaml
+                    raise PlayError(
+                        f"{connection.topic}: the bag's metadata counts no message on it, yet "
+                        "it holds some: its metadata.yaml disagrees with its files"
+                    )
                 read += 1
                 yield connection.topic, log_time_ns, raw
+        except PlayError:
+            raise
         except Exception as exc:  # rosbags raises assorted errors on a corrupt chunk
             reason = f"unreadable after {read} messages: {type(exc).__name__}: {exc}"
             raise BagDamagedError(bag, reason) from exc
@@ -359,11 +366,6 @@ def _one_pass(
             delay = target - time.monotonic()
         if clock is not None:
             clock.tick(log_time_ns)
-        if topic not in publishers:  # counted 0 by the metadata rosbags read: not the bag's
-            raise PlayError(
-                f"{topic}: the bag's metadata counts no message on it, yet it holds some: "
-                "its metadata.yaml disagrees with its files"
-            )
         try:
             if not _publish_held_back(publishers[topic], bytes(raw), stop):
                 return
