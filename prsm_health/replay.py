@@ -83,7 +83,8 @@ class ReplayResult:
     before it), or None; inputs_complete: every input sample was read all the same (the
     damage is in the truth only). stopped: the replay was stopped before the end of the bag
     (the same). elapsed_s: wall time of reading and estimating (without writing ``out`` or
-    scoring).
+    scoring). speed_noise_std_rad_s: the speed noise the estimator measured in motion (None:
+    too little motion).
     """
 
     states: list[HealthState]
@@ -95,6 +96,7 @@ class ReplayResult:
     stopped: bool
     elapsed_s: float
     inputs_complete: bool = True
+    speed_noise_std_rad_s: float | None = None
 
 
 def _chunks(bag: Path, topics: InputTopics, damage: list[BagError]) -> Iterator[MotorSamples]:
@@ -183,6 +185,7 @@ def replay(
         stopped=stopped,
         elapsed_s=elapsed,
         inputs_complete=inputs_complete,
+        speed_noise_std_rad_s=estimator.speed_noise_std_rad_s,
     )
 
 

@@ -34,6 +34,7 @@ from prsm_health.estimation.params import (
     load_params_mapping,
     params_from_mapping,
 )
+from prsm_health.estimation.speed_noise import HISTORY_BLOCKS
 from prsm_health.interrupt import (
     EXIT_INTERRUPTED,
     remove_output,
@@ -360,6 +361,13 @@ def _rejected_why(bag: Path, topics: InputTopics, result: ReplayResult) -> str:
     )
 
 
+def _speed_noise(result: ReplayResult) -> str:
+    """The speed noise measured in motion, or why there is none."""
+    if result.speed_noise_std_rad_s is None:
+        return f"speed noise not measured (under {HISTORY_BLOCKS} blocks in motion)"
+    return f"speed noise {result.speed_noise_std_rad_s:.2f} rad/s in motion"
+
+
 def summary(bag: Path, source: str, result: ReplayResult) -> str:
     """A few lines for the operator: what was read, the last estimate, the scores."""
     counters = result.counters
@@ -368,7 +376,7 @@ def summary(bag: Path, source: str, result: ReplayResult) -> str:
         f"{bag}: {result.samples} samples, {len(result.states)} estimates in "
         f"{result.elapsed_s:.2f} s ({rate:,.0f} samples/s); parameters: {source}",
         f"  samples accepted {counters.accepted}, rejected {counters.rejected_total} "
-        f"(time resets {counters.time_resets}, gaps {counters.gaps})",
+        f"(time resets {counters.time_resets}, gaps {counters.gaps}); {_speed_noise(result)}",
     ]
     if result.damage is not None:
         covered = "estimates cover" if result.states else "no estimate from"

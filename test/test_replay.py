@@ -7,6 +7,7 @@ import dataclasses
 import json
 import math
 import os
+import re
 import shutil
 import signal
 import time
@@ -90,6 +91,10 @@ def test_replay_estimates_scores_and_writes_what_the_node_publishes(
     (jam,) = result.metrics.jams
     assert jam.delay_s is not None and jam.delay_s < 0.5
     assert result.metrics.load_rmse_percent_rated < 2.0
+    # The scene's drive differences a 4096-count encoder into the speed: about 0.47 rad/s
+    # (docs/performance.md, "The drive's sensors"), measured in motion.
+    assert result.speed_noise_std_rad_s is not None
+    assert 0.4 < result.speed_noise_std_rad_s < 0.55
     store = typestore()
     with Reader(out) as reader:
         counts = {c.topic: c.msgcount for c in reader.connections}
@@ -862,3 +867,10 @@ def test_an_output_that_fails_to_write_still_gets_the_summary_printed(
     captured = capsys.readouterr()
     assert code == 2 and "--report: cannot write into" in captured.err
     assert "samples accepted 12000" in captured.out
+    assert re.search(r"; speed noise 0\.\d\d rad/s in motion\n", captured.out)
+
+
+def test_the_summary_says_when_the_speed_noise_was_not_measured(bag: Path) -> None:
+    result = dataclasses.replace(replay(bag, params()), speed_noise_std_rad_s=None)
+    text = replay_command.summary(bag, "x", result)
+    assert "; speed noise not measured (under 64 blocks in motion)\n" in text

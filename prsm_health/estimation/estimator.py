@@ -85,6 +85,12 @@ class HealthEstimator:
         return self._blocker.input_clock_s
 
     @property
+    def speed_noise_std_rad_s(self) -> float | None:
+        """The motor speed's noise measured in motion so far (used where larger than
+        ``noise.speed_std_rad_s``; :mod:`prsm_health.estimation.speed_noise`), None before."""
+        return self._blocker.speed_noise.measured_std_rad_s
+
+    @property
     def log_evidence(self) -> float:
         """log p(y) of the blocks that weighed the jam counts so far, under the filter bank's
         model (the sum of the log normalisers of the counts' probabilities)."""
@@ -118,8 +124,9 @@ class HealthEstimator:
         """Everything needed to resume after a restart, as plain JSON-able data.
 
         The hypotheses' filter states, ripple axes and probabilities, the accumulated
-        degradation, the input counters, and fingerprints of the screw and of the rest of the
-        actuator (:meth:`restore` says what it does with them).
+        degradation, the input counters, the speed noise measured in motion, and fingerprints
+        of the screw and of the rest of the actuator (:meth:`restore` says what it does with
+        them).
         """
         bank = self._bank
         return {
@@ -142,6 +149,7 @@ class HealthEstimator:
             "degradation": self._degradation.state.to_dict(),
             "samples_accepted": self.counters.accepted,
             "samples_rejected": self.counters.rejected,
+            "speed_noise_var_rad2_s2": self._blocker.speed_noise.saved(),
         }
 
     def restore(self, snapshot: dict[str, Any]) -> tuple[str, ...]:
@@ -180,6 +188,7 @@ class HealthEstimator:
         self._degradation.state = saved.degradation
         self.counters.accepted = saved.samples_accepted
         self.counters.rejected = saved.samples_rejected
+        self._blocker.speed_noise.resume(saved.speed_noise_var_rad2_s2)
         self._resumed = True
         self._last = None
         return saved.changed_parts

@@ -26,12 +26,14 @@ from __future__ import annotations
 
 import enum
 import math
+from collections.abc import Callable
 from dataclasses import dataclass, field
 
 import numpy as np
 from numpy.typing import NDArray
 
 from prsm_health.estimation.params import EstimatorParams
+from prsm_health.estimation.speed_noise import MIN_SAMPLES, SpeedNoise
 from prsm_health.physics.meshing import carrier_speed_rad_s
 from prsm_health.signals import BoolArray, FloatArray, IntArray, MotorSamples
 
@@ -114,7 +116,9 @@ class Block:
     mean speed, and the speed change over the block's span divided by that span (a block
     without a span, one sample: since the last sample before it on its time line);
     motor_acceleration_var_rad2_s4: that acceleration's variance from the speed noise,
-    2 sigma^2 / span^2 (two samples' difference; 0 where there is no span to take one).
+    2 sigma^2 / span^2 (two samples' difference; 0 where there is no span to take one), sigma
+    the larger of ``noise.speed_std_rad_s`` and the noise measured in motion
+    (:class:`~prsm_health.estimation.speed_noise.SpeedNoise`).
     carrier_cos, carrier_sin: means of cos and sin of the carrier angle (exact averaging of
     the carrier-frequency ripple).
     direction: +1 or -1 when every sample moves that way faster than the standstill speed,
@@ -226,6 +230,7 @@ class SampleBlocker:
         # Whether the last two samples before the pending ones stood out from both neighbours.
         self._previous_spike_like = np.zeros(2, dtype=np.bool_)
         self._stuck_run = 0  # length of the identical-current run ending there
+        self.speed_noise = SpeedNoise(params.noise.speed_std_rad_s)
 
     @property
     def input_clock_s(self) -> float | None:
@@ -531,19 +536,18 @@ class SampleBlocker:
         span = t[last]
         measurable = span > SHORTEST_SLOPE_SPAN_S
         slope = np.divide(w[last] - w[starts], span, out=np.zeros_like(span), where=measurable)
-        slope_var = np.divide(
-            2.0 * self._params.noise.speed_std_rad_s**2,
-            span**2,
-            out=np.zeros_like(span),
-            where=measurable,
-        )
-        covariance_ti = means(t * run.current_a) - mean_t * mean_i
-        trend = np.divide(covariance_ti**2, variance_t, out=np.zeros_like(mean_t), where=spread)
-        residual_var = np.maximum(means(run.current_a**2) - mean_i**2 - trend, 0.0)
+        residual_var = _variance_about_trend(run.current_a, t, mean_t, variance_t, spread, means)
         threshold = self._params.filter.standstill_speed_rad_s
         direction = (np.minimum.reduceat(w, starts) > threshold).astype(np.int64) - (
             np.maximum.reduceat(w, starts) < -threshold
         ).astype(np.int64)
+        speed_var = _variance_about_trend(w, t, mean_t, variance_t, spread, means)
+        measured = (direction != 0) & (counts >= MIN_SAMPLES)
+        unbiased = speed_var * np.divide(
+            counts, counts - 2.0, out=np.ones(len(counts)), where=measured
+        )
+        noise_var = self.speed_noise.variances(unbiased, measured)
+        slope_var = np.divide(2.0 * noise_var, span**2, out=np.zeros_like(span), where=measurable)
         stamps = t0 + mean_t
         torque = mean_i * self._torque_constant
         cos_mean, sin_mean = means(np.cos(angle)), means(np.sin(angle))
@@ -577,7 +581,7 @@ class SampleBlocker:
                 since_s = float(last_stamps[b]) - self._last_sample_stamp
                 if not measurable[b] and not new_line[b] and since_s > SHORTEST_SLOPE_SPAN_S:
                     acceleration = (float(w[last[b]]) - self._last_sample_speed) / since_s
-                    acceleration_var = 2.0 * self._params.noise.speed_std_rad_s**2 / since_s**2
+                    acceleration_var = 2.0 * float(noise_var[b]) / since_s**2
             blocks.append(
                 Block(
                     stamp_s=float(stamps[b]),
@@ -605,6 +609,22 @@ class SampleBlocker:
             self._last_sample_speed = float(w[last[b]])
             self._time_reset = False
         return blocks
+
+
+def _variance_about_trend(
+    x: FloatArray,
+    t: FloatArray,
+    mean_t: FloatArray,
+    variance_t: FloatArray,
+    spread: BoolArray,
+    means: Callable[[FloatArray], FloatArray],
+) -> FloatArray:
+    """Each block's variance of ``x`` about its least-squares straight line in ``t`` (about
+    its mean where the stamps have no ``spread``); ``means`` averages per block."""
+    mean_x = means(x)
+    covariance = means(t * x) - mean_t * mean_x
+    trend = np.divide(covariance**2, variance_t, out=np.zeros_like(mean_t), where=spread)
+    return np.maximum(means(x * x) - mean_x**2 - trend, 0.0)
 
 
 def _at(counts: Counts, index: int | slice | BoolArray) -> Counts:

@@ -49,8 +49,10 @@ class NoiseParams:
     """What the sensors are like (the simulator's defaults; docs/scenes.md).
 
     current_std_a: white noise of one current sample. speed_std_rad_s: of one motor speed
-    sample. model_error_rel: relative error of the torque model (surrogate, unmodelled
-    harmonics, radial load unknown), added to the measurement variance of each block.
+    sample, at least: the estimator measures the speed's noise in motion and takes the larger
+    (:mod:`prsm_health.estimation.speed_noise`). model_error_rel: relative error of the torque
+    model (surrogate, unmodelled harmonics, radial load unknown), added to the measurement
+    variance of each block.
     model_error_floor_nm: absolute floor of that error, motor side.
     torque_scale_error_rel: standard uncertainty of the torque per newton of load, relative:
     the drive train's calibration (torque constant, gear efficiency) and the friction

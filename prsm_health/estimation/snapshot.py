@@ -116,6 +116,9 @@ class SavedState:
     #: The parts of :func:`actuator_parts` that changed since the save: empty when the
     #: filters' states resume too, else only what belongs to the screw does.
     changed_parts: tuple[str, ...]
+    #: The speed noise measured in motion (:meth:`SpeedNoise.saved
+    #: <prsm_health.estimation.speed_noise.SpeedNoise.saved>`; empty in a state saved before).
+    speed_noise_var_rad2_s2: list[float]
 
 
 def read_snapshot(
@@ -154,6 +157,7 @@ def read_snapshot(
         degradation = Degradation(**{k: float(v) for k, v in snapshot["degradation"].items()})
         accepted = int(snapshot["samples_accepted"])
         rejected = [int(v) for v in snapshot["samples_rejected"]]
+        speed_noise = [float(v) for v in snapshot.get("speed_noise_var_rad2_s2", [])]
     except SnapshotError:
         raise  # it says what is wrong
     except (KeyError, TypeError, ValueError, AttributeError) as exc:
@@ -164,6 +168,10 @@ def read_snapshot(
     if not all(0.0 <= v < SNAPSHOT_LARGEST_VALUE for v in degradation.to_dict().values()):
         raise SnapshotError(
             f"degradation values must be >= 0 and < {SNAPSHOT_LARGEST_VALUE:g}: {degradation}"
+        )
+    if not all(0.0 <= v < SNAPSHOT_LARGEST_VALUE for v in speed_noise):  # NaN fails too
+        raise SnapshotError(
+            f"speed noise variances must be >= 0 and < {SNAPSHOT_LARGEST_VALUE:g}: {speed_noise}"
         )
     counts = [accepted, *rejected]
     if (
@@ -183,6 +191,7 @@ def read_snapshot(
         accepted,
         rejected,
         () if whole else changed_parts(snapshot.get("parts"), params),
+        speed_noise,
     )
 
 

@@ -21,6 +21,7 @@ from prsm_health.estimation.inputs import (
     merge_blocks,
 )
 from prsm_health.estimation.params import EstimatorParams
+from prsm_health.estimation.speed_noise import HISTORY_BLOCKS
 from prsm_health.physics.meshing import carrier_speed_rad_s
 from prsm_health.physics.presets import load_preset
 from prsm_health.signals import MotorSamples
@@ -58,12 +59,15 @@ def with_values(samples: MotorSamples, **changes: tuple[int, float]) -> MotorSam
 
 @pytest.mark.parametrize("size", [1, 7, 333])
 def test_blocks_do_not_depend_on_the_chunking(size: int) -> None:
-    samples = with_values(run(), current_a=(500, 40.0), speed_rad_s=(900, math.nan))
+    """Four seconds: a hundred blocks, so that the speed noise's measurement (HISTORY_BLOCKS)
+    sets the later blocks' acceleration variances too."""
+    samples = with_values(run(4.0), current_a=(500, 40.0), speed_rad_s=(900, math.nan))
     samples.current_a[1200 : 1200 + 3 * STUCK_RUN_SAMPLES] = 3.3
     reference, ref_blocker = feed_in_chunks(samples, len(samples))
     blocks, blocker = feed_in_chunks(samples, size)
     assert blocks == reference
     assert blocker.counters == ref_blocker.counters
+    assert blocker.speed_noise.measured_std_rad_s is not None
 
 
 def test_each_block_counts_the_samples_up_to_its_last_one() -> None:
@@ -394,13 +398,20 @@ def test_samples_closer_than_a_microsecond_carry_no_acceleration() -> None:
 def test_the_acceleration_variance_is_that_of_a_speed_difference() -> None:
     """The block's acceleration is the speed change over its span, so its variance is
     2 sigma^2 / span^2 (not a least-squares slope's 12 sigma^2 / (n T^2), about n / 6 times
-    smaller): measured over 400 noisy blocks of constant speed. A merged block's is that of
-    the sample-weighted mean."""
+    smaller): measured over 400 noisy blocks of constant speed, whose noise is the parameter's
+    (sigma: the parameter until HISTORY_BLOCKS blocks are measured, then the larger of it and
+    the measured noise, here within a few per cent of it). A merged block's is that of the
+    sample-weighted mean."""
     blocks, _ = feed_in_chunks(run(16.0, seed=4), 500)
     full = [b for b in blocks if b.samples == 40]
     sigma = PARAMS.noise.speed_std_rad_s
     expected = 2.0 * sigma**2 / 0.039**2  # 40 samples 1 ms apart span 39 ms
-    assert all(b.motor_acceleration_var_rad2_s4 == pytest.approx(expected) for b in full)
+    first = full[: HISTORY_BLOCKS - 1]
+    assert all(b.motor_acceleration_var_rad2_s4 == pytest.approx(expected) for b in first)
+    assert all(
+        0.999 * expected < b.motor_acceleration_var_rad2_s4 < 1.1 * expected
+        for b in full[HISTORY_BLOCKS:]
+    )
     measured = float(np.var([b.motor_acceleration_rad_s2 for b in full]))
     assert measured == pytest.approx(expected, rel=0.2)  # 400 blocks: about 7 % sampling error
     merged = merge_blocks(full[:5])

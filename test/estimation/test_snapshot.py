@@ -58,6 +58,27 @@ def test_the_ripple_axes_survive_a_restart() -> None:
     assert all(h.ripple_axis is None for h in resumed._bank.hypotheses)
 
 
+def test_the_measured_speed_noise_survives_a_restart() -> None:
+    """A restarted estimator keeps the speed noise it measured in motion (a coarse encoder's
+    2 rad/s; else the parameter's 0.2 would hold for 2.6 s of motion, when the inertia
+    torque's noise made false jams); a state saved before it measured from scratch."""
+    rng = np.random.default_rng(11)
+    samples = moving(4.0)
+    samples.speed_rad_s[:] = 150.0 + rng.normal(0.0, 2.0, len(samples))
+    first = HealthEstimator(params())
+    first.process(samples)
+    measured = first.speed_noise_std_rad_s
+    assert measured == pytest.approx(2.0, rel=0.1)
+    saved = json.loads(json.dumps(first.snapshot()))
+    resumed = HealthEstimator(params())
+    resumed.restore(saved)
+    assert resumed.speed_noise_std_rad_s == measured
+    del saved["speed_noise_var_rad2_s2"]
+    older = HealthEstimator(params())
+    older.restore(saved)
+    assert older.speed_noise_std_rad_s is None
+
+
 def test_a_state_of_another_screw_is_refused_as_foreign_unless_damaged() -> None:
     saved = HealthEstimator(params()).snapshot()
     # Said as it is (it read "malformed state: SnapshotError('the state belongs to ...')").
@@ -201,6 +222,11 @@ def test_an_unpruned_bank_restarts_every_count_with_its_probability() -> None:
         lambda s: s.update(samples_accepted=-1),
         # Each below 2^62, their sum beyond int64: every block after overflowed (a review).
         lambda s: s.update(samples_rejected=[2**62 - 1] * 3 + [0] * 2),
+        # A variance is >= 0 and finite; the median over them would set every acceleration's.
+        lambda s: s.update(speed_noise_var_rad2_s2=[4.0, -1.0]),
+        lambda s: s.update(speed_noise_var_rad2_s2=[float("nan")]),
+        lambda s: s.update(speed_noise_var_rad2_s2=["loud"]),
+        lambda s: s.update(speed_noise_var_rad2_s2=4.0),
     ],
 )
 def test_a_malformed_state_is_refused(damage: object) -> None:
