@@ -32,6 +32,7 @@ from prsm_health.bags.writer import BagWriter, write_joint_states, write_motor_s
 from prsm_health.cli import main
 from prsm_health.estimation.estimate import EstimateEvent
 from prsm_health.estimation.params import EstimatorParams
+from prsm_health.outputs import INPUT_HEALTH
 from prsm_health.replay import ReplayResult, replay
 from prsm_health.report import (
     PLOTS,
@@ -126,6 +127,17 @@ def test_replay_estimates_scores_and_writes_what_the_node_publishes(
         for status in message.ros_msg.status
     }
     assert hardware_ids == {SPECS["hardware_id"].default}
+    last_inputs = [
+        status
+        for message in decoded
+        if message.channel.topic == DIAGNOSTICS_TOPIC
+        for status in message.ros_msg.status
+        if status.name == INPUT_HEALTH
+    ][-1]
+    values = {kv.key: kv.value for kv in last_inputs.values}
+    assert float(values["speed_noise_rad_s"]) == pytest.approx(
+        result.speed_noise_std_rad_s, rel=1e-3
+    )
 
 
 def test_diagnostics_come_once_per_second_at_10_khz(tmp_path: Path) -> None:

@@ -771,6 +771,10 @@ def test_demo_runs_node_player_and_monitor(tmp_path: Path) -> None:
     accepted = re.search(r"\((\d+) samples accepted", summary)
     received = re.search(r"input health: .*, 0 rejected of (\d+) received", summary)
     assert accepted and received and received[1] == accepted[1], summary
+    # The speed noise the node's estimator measured in motion: the scene's drive differences
+    # a 4096-count encoder (docs/performance.md, "The drive's sensors").
+    noise = re.search(r"input health: .* received, speed noise (\d+\.\d+) rad/s", summary)
+    assert noise and 0.4 < float(noise[1]) < 0.55, summary
     assert "STALE" not in summary
     # Which estimate the statuses report (they showed another load than the line above).
     assert re.search(r"\ndiagnostics of the estimate at bag time \d+\.\d{3} s:\n", summary)
