@@ -29,13 +29,17 @@ from prsm_health.yamlio import YamlError
 
 def params_with_actuator(base: Path, scene: SceneActuator) -> dict[str, Any]:
     """The parameters of ``base`` with the actuator of ``scene`` instead of theirs, checked as
-    the node will check them.
+    the node will check them. A file with an ``actuator:`` section of its own is checked with
+    it first, as ``prsm-health replay`` checks it before taking the scene's: a mistake in a
+    section that is replaced is still a mistake in the file.
 
     Raises:
         YamlError: ``base`` cannot be read.
         ParameterError: a key or value of ``base`` that the node would refuse.
     """
     params = load_params_mapping(base)
+    if "actuator" in params:
+        params_from_mapping(params)
     params["actuator"] = scene.section
     params_from_mapping(params)
     return params

@@ -231,6 +231,22 @@ def test_node_params_refuses_what_the_node_would_refuse(
     assert err.count("\n") == 1 and not out.parent.exists()
 
 
+def test_node_params_refuses_a_mistake_in_the_actuator_it_replaces(
+    renamed: Path, tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    """The file's own actuator section gives way to the bag's, but a mistake in it is refused
+    as replay refuses it (node-params alone wrote the file out with the mistake dropped)."""
+    bad = tmp_path / "bad.yaml"
+    bad.write_text("actuator:\n  preset: dong2022-downhole\n  case_forwrad: 2\n")
+    out = tmp_path / "node.yaml"
+    assert main(["node-params", str(renamed), "--out", str(out), "--params", str(bad)]) == 2
+    err = capsys.readouterr().err
+    assert err.startswith(f"prsm-health: error: --params: {bad}: actuator")
+    assert "case_forwrad" in err and not out.exists()
+    assert main(["replay", str(renamed), "--params", str(bad)]) == 2
+    assert "case_forwrad" in capsys.readouterr().err
+
+
 def test_a_bag_without_a_record_gets_no_node_params_and_no_play_note(
     renamed: Path, tmp_path: Path, capsys: pytest.CaptureFixture[str]
 ) -> None:
