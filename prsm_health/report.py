@@ -48,6 +48,8 @@ SMALLEST_ERROR_AXIS_KN = 0.01
 #: of it (of the smallest span at least) on either side [-, kN].
 LOAD_AXIS_MARGIN = 0.1
 SMALLEST_LOAD_SPAN_KN = 1.0
+#: The jam plot shows the counts whose probability exceeds this somewhere.
+SHOWN_PROBABILITY = 1e-3
 
 
 @dataclass(frozen=True)
@@ -84,6 +86,28 @@ MARKED_EVENTS = {
     EstimateEvent.TIME_RESET: ("sensor time reset", "tab:red", ":"),
     EstimateEvent.DIVERGENCE_RECOVERED: ("load re-initialised (divergence)", "tab:purple", "-."),
 }
+
+
+def _time_label(clock_offsets_s: tuple[float, ...] | None) -> str:
+    """The plots' x label: the time, and the shifts of the estimates after each sensor clock
+    jump (an offset that differs from the one before it; the first from 0). The same offset
+    again (a gap in the data keeps the offset before it) is not named."""
+    found = clock_offsets_s or ()
+    changes = [b for a, b in zip((0.0, *found), found, strict=False) if b != a]
+    if not changes:
+        return "time [s]"
+    shifts = ", ".join(f"{offset:+.3f} s" for offset in changes)
+    return f"time [s] (estimates after a sensor clock jump shifted by {shifts}, as scored)"
+
+
+def _counts_shown(jam_probabilities: FloatArray) -> list[int]:
+    """The jam counts the jam plot stacks and names: those whose probability (a column per
+    count) exceeds SHOWN_PROBABILITY somewhere; eleven entries in the legend would hide it."""
+    return [
+        k
+        for k in range(jam_probabilities.shape[1])
+        if jam_probabilities[:, k].max() > SHOWN_PROBABILITY
+    ]
 
 
 def _mark_events(axis: Axes, series: _Series) -> list[Line2D]:
@@ -214,19 +238,13 @@ def write_report(
     offsets = metrics.clock_offsets_s if metrics is not None else None
     series = _series(states, offsets)
     t = series.stamp_s
-    xlabel = "time [s]"
-    found = offsets or ()
-    changes = [b for a, b in zip((0.0, *found), found, strict=False) if b != a]
-    if changes:  # a gap in the data keeps the offset before it: not named
-        shifts = ", ".join(f"{offset:+.3f} s" for offset in changes)
-        xlabel += f" (estimates after a sensor clock jump shifted by {shifts}, as scored)"
+    xlabel = _time_label(offsets)
     figures = []
 
     figures.append(_load_figure(series, truth, xlabel=xlabel, title=title))
 
     figure, axis = plt.subplots(figsize=(10, 4))
-    counts = series.jams.shape[1]
-    shown = [k for k in range(counts) if series.jams[:, k].max() > 1e-3]
+    shown = _counts_shown(series.jams)
     handles: list[Artist] = list(
         axis.stackplot(t, series.jams[:, shown].T, labels=[f"P({k} jammed)" for k in shown])
     )

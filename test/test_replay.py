@@ -36,10 +36,13 @@ from prsm_health.outputs import INPUT_HEALTH
 from prsm_health.replay import ReplayResult, replay
 from prsm_health.report import (
     PLOTS,
+    SHOWN_PROBABILITY,
     _band,
+    _counts_shown,
     _estimates_span,
     _load_figure,
     _series,
+    _time_label,
     plt,
     write_report,
 )
@@ -886,3 +889,27 @@ def test_the_summary_says_when_the_speed_noise_was_not_measured(bag: Path) -> No
     result = dataclasses.replace(replay(bag, params()), speed_noise_std_rad_s=None)
     text = replay_command.summary(bag, "x", result)
     assert "; speed noise not measured (under 64 blocks in motion)\n" in text
+
+
+def test_the_time_label_names_each_clock_jumps_shift_once() -> None:
+    """The plots' x label names the shift of the estimates after each sensor clock jump (the
+    metrics' offsets, one per time line), not the same offset again after a gap, and nothing
+    without a jump."""
+    assert _time_label(None) == "time [s]"
+    assert _time_label((0.0,)) == "time [s]"
+    assert _time_label((0.0, 0.0)) == "time [s]"  # a gap: the same clock
+    shifted = "time [s] (estimates after a sensor clock jump shifted by {}, as scored)"
+    assert _time_label((0.0, 5.0, 5.0)) == shifted.format("+5.000 s")
+    assert _time_label((2.0,)) == shifted.format("+2.000 s")  # jumped before the first
+    assert _time_label((0.0, 5.0, -3.25)) == shifted.format("+5.000 s, -3.250 s")
+
+
+def test_the_jam_plot_names_only_the_counts_that_were_ever_likely() -> None:
+    """Eleven legend entries would hide the plot: a count is shown where its probability
+    exceeded SHOWN_PROBABILITY somewhere, and only then."""
+    probabilities = np.zeros((4, 11))
+    probabilities[:, 0] = [1.0, 0.5, 0.0, 0.0]
+    probabilities[:, 1] = [0.0, 0.5, 1.0 - SHOWN_PROBABILITY, 0.0]
+    probabilities[2, 2] = SHOWN_PROBABILITY  # never above it
+    probabilities[3, 3] = 1.0
+    assert _counts_shown(probabilities) == [0, 1, 3]
