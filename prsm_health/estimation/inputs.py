@@ -122,7 +122,8 @@ class Block:
     carrier_cos, carrier_sin: means of cos and sin of the carrier angle (exact averaging of
     the carrier-frequency ripple).
     direction: +1 or -1 when every sample moves that way faster than the standstill speed,
-    else 0 (standstill or reversing). current_residual_var_a2: variance of the current about
+    else 0 (standstill or reversing). reverses: samples move both ways faster than it (the
+    motion reverses inside the block). current_residual_var_a2: variance of the current about
     its straight-line trend in the block (a step inside the block, e.g. the onset of a jam,
     makes it large; the measurement noise uses it). silence_before_s: time from the previous
     block's last accepted sample to this block's first (a hole in the data: dropouts or
@@ -144,6 +145,7 @@ class Block:
     carrier_cos: float
     carrier_sin: float
     direction: int
+    reverses: bool = False
     current_residual_var_a2: float = 0.0
     motor_acceleration_var_rad2_s4: float = 0.0
     silence_before_s: float = 0.0
@@ -172,6 +174,7 @@ def merge_blocks(blocks: list[Block]) -> Block:
         carrier_cos=mean("carrier_cos"),
         carrier_sin=mean("carrier_sin"),
         direction=directions.pop() if len(directions) == 1 else 0,
+        reverses=any(b.reverses for b in blocks),
         current_residual_var_a2=mean("current_residual_var_a2"),
         # The variance of the weighted mean of independent accelerations.
         motor_acceleration_var_rad2_s4=float(
@@ -538,9 +541,9 @@ class SampleBlocker:
         slope = np.divide(w[last] - w[starts], span, out=np.zeros_like(span), where=measurable)
         residual_var = _variance_about_trend(run.current_a, t, mean_t, variance_t, spread, means)
         threshold = self._params.filter.standstill_speed_rad_s
-        direction = (np.minimum.reduceat(w, starts) > threshold).astype(np.int64) - (
-            np.maximum.reduceat(w, starts) < -threshold
-        ).astype(np.int64)
+        lowest, highest = np.minimum.reduceat(w, starts), np.maximum.reduceat(w, starts)
+        direction = (lowest > threshold).astype(np.int64) - (highest < -threshold).astype(np.int64)
+        reverses = (lowest < -threshold) & (highest > threshold)
         speed_var = _variance_about_trend(w, t, mean_t, variance_t, spread, means)
         measured = (direction != 0) & (counts >= MIN_SAMPLES)
         unbiased = speed_var * np.divide(
@@ -593,6 +596,7 @@ class SampleBlocker:
                     carrier_cos=float(cos_mean[b]),
                     carrier_sin=float(sin_mean[b]),
                     direction=int(direction[b]),
+                    reverses=bool(reverses[b]),
                     current_residual_var_a2=float(residual_var[b]),
                     motor_acceleration_var_rad2_s4=acceleration_var,
                     silence_before_s=silence,

@@ -443,6 +443,27 @@ def test_a_block_of_one_sample_takes_its_acceleration_from_the_sample_before() -
         assert abs(block.motor_acceleration_rad_s2 - acceleration) < 5.0 * std
 
 
+def test_a_block_in_which_the_motion_reverses_says_so() -> None:
+    """A block whose samples move both ways faster than the standstill speed reverses (the
+    estimator forgets the load there); one that only enters or leaves the standstill band does
+    not; a merged block reverses if any of its blocks does."""
+    t = np.arange(0.0, 0.16, 0.001) + 0.1
+    speed = 100.0 * np.sin(2.0 * math.pi * t / 0.16 + 0.3)  # crosses zero twice
+    current = 5.0 + np.random.default_rng(3).normal(0.0, 0.05, len(t))  # not stuck
+    samples = MotorSamples(t, current, speed, np.cumsum(speed) * 0.001)
+    blocks, _ = feed_in_chunks(samples, 13)
+    threshold = PARAMS.filter.standstill_speed_rad_s
+    expected = []
+    for block in blocks:
+        inside = np.abs(t - block.stamp_s) < 0.02  # a 40 ms grid cell about its mean stamp
+        moving = speed[inside]
+        expected.append(bool(moving.min() < -threshold and moving.max() > threshold))
+    assert [b.reverses for b in blocks] == expected and sum(expected) == 2
+    assert all(b.direction == 0 for b in blocks if b.reverses)
+    assert merge_blocks(blocks[:2]).reverses == (blocks[0].reverses or blocks[1].reverses)
+    assert not merge_blocks([b for b in blocks if not b.reverses]).reverses
+
+
 def test_a_block_of_one_sample_takes_no_acceleration_across_a_gap_or_a_microsecond() -> None:
     """The sample before must be on the same time line (not before a gap, where the speed
     may have changed any way) and at least SHORTEST_SLOPE_SPAN_S earlier (a speed step over
