@@ -539,12 +539,14 @@ class SampleBlocker:
         span = t[last]
         measurable = span > SHORTEST_SLOPE_SPAN_S
         slope = np.divide(w[last] - w[starts], span, out=np.zeros_like(span), where=measurable)
-        residual_var = _variance_about_trend(run.current_a, t, mean_t, variance_t, spread, means)
+        residual_var = _variance_about_trend(
+            run.current_a, mean_i, t, mean_t, variance_t, spread, means
+        )
         threshold = self._params.filter.standstill_speed_rad_s
         lowest, highest = np.minimum.reduceat(w, starts), np.maximum.reduceat(w, starts)
         direction = (lowest > threshold).astype(np.int64) - (highest < -threshold).astype(np.int64)
         reverses = (lowest < -threshold) & (highest > threshold)
-        speed_var = _variance_about_trend(w, t, mean_t, variance_t, spread, means)
+        speed_var = _variance_about_trend(w, mean_w, t, mean_t, variance_t, spread, means)
         measured = (direction != 0) & (counts >= MIN_SAMPLES)
         unbiased = speed_var * np.divide(
             counts, counts - 2.0, out=np.ones(len(counts)), where=measured
@@ -617,15 +619,16 @@ class SampleBlocker:
 
 def _variance_about_trend(
     x: FloatArray,
+    mean_x: FloatArray,
     t: FloatArray,
     mean_t: FloatArray,
     variance_t: FloatArray,
     spread: BoolArray,
     means: Callable[[FloatArray], FloatArray],
 ) -> FloatArray:
-    """Each block's variance of ``x`` about its least-squares straight line in ``t`` (about
-    its mean where the stamps have no ``spread``); ``means`` averages per block."""
-    mean_x = means(x)
+    """Each block's variance of ``x`` (block means ``mean_x``) about its least-squares
+    straight line in ``t`` (about its mean where the stamps have no ``spread``); ``means``
+    averages per block."""
     covariance = means(t * x) - mean_t * mean_x
     trend = np.divide(covariance**2, variance_t, out=np.zeros_like(mean_t), where=spread)
     return np.maximum(means(x * x) - mean_x**2 - trend, 0.0)
