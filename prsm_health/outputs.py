@@ -121,7 +121,7 @@ class InputHealth:
     by which the accepted samples' stamps advance per second of the caller's clock (the median
     over the last second; -1: not known, e.g. in an offline replay, whose clock is the stamps).
     input_clock_s: the latest accepted sample's stamp (None: not known, as in an offline
-    replay). speed_noise_rad_s: the motor speed's noise the estimator measured in motion
+    replay). speed_noise_std_rad_s: the motor speed's noise the estimator measured in motion
     (:attr:`HealthEstimator.speed_noise_std_rad_s
     <prsm_health.estimation.estimator.HealthEstimator.speed_noise_std_rad_s>`; None: not yet).
     """
@@ -137,7 +137,7 @@ class InputHealth:
     rejecting_since_s: float | None = None
     stamp_rate: float = -1.0
     input_clock_s: float | None = None
-    speed_noise_rad_s: float | None = None
+    speed_noise_std_rad_s: float | None = None
 
 
 @dataclass(frozen=True)
@@ -339,7 +339,7 @@ def _inputs(inputs: InputHealth, th: DiagnosticThresholds, now_s: float) -> _Par
         reasons = ", ".join(k for k, v in inputs.recent_rejected.items() if v)
         problems.append(f"{100.0 * fraction:.1f} % rejected in the last second ({reasons})")
     rejected_total = sum(inputs.rejected.values())
-    noise = inputs.speed_noise_rad_s
+    noise = inputs.speed_noise_std_rad_s
     message = "; ".join(problems) or (
         f"{inputs.rate_hz:.0f} Hz, {rejected_total} rejected of {inputs.received} received"
         + ("" if noise is None else f", speed noise {noise:.2f} rad/s")
@@ -353,7 +353,7 @@ def _inputs(inputs: InputHealth, th: DiagnosticThresholds, now_s: float) -> _Par
         "rejected": rejected_total,
         "recent_rejected_fraction": inputs.recent_rejected_fraction,
         "stamp_rate": inputs.stamp_rate,
-        "speed_noise_rad_s": -1.0 if noise is None else noise,
+        "speed_noise_std_rad_s": -1.0 if noise is None else noise,
     }
     values.update({f"rejected_{reason}": count for reason, count in inputs.rejected.items()})
     return (Level.WARN if problems else Level.OK), message, _numbers(values)

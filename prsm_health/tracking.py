@@ -45,13 +45,13 @@ class InputTracker:
     that stops with it goes stale). Counts are of
     this run: totals an estimator brings from a restored state are its starting point
     (:meth:`start_from`), not samples judged now. ``topic``: where the inputs come from (named
-    by the input-health status; empty if unknown). ``speed_noise_rad_s``: the motor speed's
+    by the input-health status; empty if unknown). ``speed_noise_std_rad_s``: the motor speed's
     noise the estimator measured in motion, as the caller last read it (None: not yet).
     """
 
     def __init__(self) -> None:
         self.topic = ""
-        self.speed_noise_rad_s: float | None = None
+        self.speed_noise_std_rad_s: float | None = None
         self._received_total = 0
         self._last_sample_s: float | None = None
         # When the first sample was rejected since one was last accepted (None: none since).
@@ -172,7 +172,7 @@ class InputTracker:
             rejecting_since_s=self._rejecting_since_s,
             stamp_rate=self._stamp_rate(),
             input_clock_s=self._input_clock_s,
-            speed_noise_rad_s=self.speed_noise_rad_s,
+            speed_noise_std_rad_s=self.speed_noise_std_rad_s,
         )
 
     def _stamp_rate(self) -> float:

@@ -180,10 +180,10 @@ def test_input_health_rate_and_rejections() -> None:
     assert level == Level.OK
     assert values["rejected_non_finite"] == "3"
     assert values["received"] == "5003"
-    assert values["speed_noise_rad_s"] == "-1"  # not measured yet
-    level, message, values = statuses(i=inputs(speed_noise_rad_s=1.853))[INPUT_HEALTH]
+    assert values["speed_noise_std_rad_s"] == "-1"  # not measured yet
+    level, message, values = statuses(i=inputs(speed_noise_std_rad_s=1.853))[INPUT_HEALTH]
     assert level == Level.OK and message.endswith(" received, speed noise 1.85 rad/s")
-    assert values["speed_noise_rad_s"] == "1.853"
+    assert values["speed_noise_std_rad_s"] == "1.853"
     level, message, _ = statuses(i=inputs(rate_hz=20.0))[INPUT_HEALTH]
     assert level == Level.WARN
     assert "20 Hz" in message

@@ -138,7 +138,7 @@ def test_replay_estimates_scores_and_writes_what_the_node_publishes(
         if status.name == INPUT_HEALTH
     ][-1]
     values = {kv.key: kv.value for kv in last_inputs.values}
-    assert float(values["speed_noise_rad_s"]) == pytest.approx(
+    assert float(values["speed_noise_std_rad_s"]) == pytest.approx(
         result.speed_noise_std_rad_s, rel=1e-3
     )
 
