@@ -514,8 +514,9 @@ class JamHypotheses:
             if isinstance(kf, UnscentedKalmanFilter):
                 kf.Q = noise
                 kf.predict(dt=dt, fx=_transition_apply, transition=transition)
-                # filterpy's update reuses the propagated sigma points, which miss the process
-                # noise Q added after them: drawn again from the prior they carry it.
+                # filterpy 1.4.5's update reuses the propagated sigma points, which miss the
+                # process noise Q added after them (filterpy issues 172 and 180, fixed after
+                # that release): drawn again from the prior they carry it.
                 kf.sigmas_f = kf.points_fn.sigma_points(kf.x, kf.P)
             else:
                 kf.F, kf.Q = transition, noise
