@@ -390,12 +390,14 @@ class HealthEstimator:
         """Whether the motion reverses through zero in ``block`` (its samples move both ways)
         or just before it (it moves against the last moving block, less than
         REVERSAL_WITHIN_S after it). The load may jump there: a load that resists the motion,
-        e.g. the friction of the robot's body on the wall, changes sign with it."""
+        e.g. the friction of the robot's body on the wall, changes sign with it. A time reset
+        starts a time line without a last moving block."""
+        if block.time_reset:
+            self._moving_direction = 0
         reverses = block.reverses
         if block.direction:
             reverses = reverses or (
-                not block.time_reset
-                and block.direction == -self._moving_direction
+                block.direction == -self._moving_direction
                 and block.stamp_s - self._moving_s < REVERSAL_WITHIN_S
             )
             self._moving_direction, self._moving_s = block.direction, block.stamp_s

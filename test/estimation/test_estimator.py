@@ -135,6 +135,11 @@ def test_the_estimate_of_the_block_where_the_motion_reverses_is_honest() -> None
         assert abs(state.axial_load_n - truth) < 2.0 * state.axial_load_std_n
 
 
+def block(stamp_s: float, direction: int, **changes: Any) -> Block:
+    """A 40 ms block at ``stamp_s`` moving in ``direction`` (0: standing) at 150 rad/s."""
+    return Block(stamp_s, 0.04, 40, 0.0, 150.0 * direction, 0.0, 1.0, 0.0, direction, **changes)
+
+
 @pytest.mark.parametrize(
     ("gap_s", "time_reset", "reverses"),
     [
@@ -154,14 +159,23 @@ def test_a_reversal_is_a_stop_shorter_than_its_window_on_one_time_line(
     there cost the downhole runs accuracy (docs/estimation.md, "Reversals")."""
     estimator = HealthEstimator(EstimatorParams(actuator=scene_from_mapping(downhole()).actuator))
 
-    def block(stamp_s: float, direction: int, **changes: Any) -> Block:
-        return Block(stamp_s, 0.04, 40, 0.0, 150.0 * direction, 0.0, 1.0, 0.0, direction, **changes)
-
     assert not estimator._reverses(block(1.0, 1))
     assert not estimator._reverses(block(1.04, 1))
     assert not estimator._reverses(block(1.08, 0))  # standing: no verdict yet
     assert estimator._reverses(block(1.04 + gap_s, -1, time_reset=time_reset)) == reverses
     assert estimator._reverses(block(5.0, 0, reverses=True))  # both ways inside the block
+
+
+def test_a_time_reset_standing_still_leaves_no_last_moving_block() -> None:
+    """After a clock that jumped back by 0.4 s, the first moving block (against the last one
+    of the old time line, 0.3 s before it on the stamps) is no reversal: that block belongs
+    to another time line, and the time between them is not known. (The check compared the
+    stamps across the reset where the reset block stood still.)"""
+    estimator = HealthEstimator(EstimatorParams(actuator=scene_from_mapping(downhole()).actuator))
+
+    assert not estimator._reverses(block(10.0, 1))
+    assert not estimator._reverses(block(9.6, 0, time_reset=True))
+    assert not estimator._reverses(block(9.7, -1))
 
 
 def test_without_radial_load_a_jam_is_told_by_its_step() -> None:
