@@ -103,11 +103,7 @@ def _time_label(clock_offsets_s: tuple[float, ...] | None) -> str:
 def _counts_shown(jam_probabilities: FloatArray) -> list[int]:
     """The jam counts the jam plot stacks and names: those whose probability (a column per
     count) exceeds SHOWN_PROBABILITY somewhere; eleven entries in the legend would hide it."""
-    return [
-        k
-        for k in range(jam_probabilities.shape[1])
-        if jam_probabilities[:, k].max() > SHOWN_PROBABILITY
-    ]
+    return [int(k) for k in np.flatnonzero(jam_probabilities.max(axis=0) > SHOWN_PROBABILITY)]
 
 
 def _mark_events(axis: Axes, series: _Series) -> list[Line2D]:
