@@ -64,6 +64,10 @@ MOVING_FRACTION = 0.01
 NEES_MIN_LOAD_FRACTION = 0.05
 #: Largest sensor-clock jump that the alignment after a TIME_RESET or a skip searches for [s].
 MAX_CLOCK_OFFSET_S = 10.0
+#: The search's grid: every COARSE_STEP_S over +-MAX_CLOCK_OFFSET_S, then every FINE_STEP_S
+#: within two coarse steps of the best [s].
+COARSE_STEP_S = 1e-2
+FINE_STEP_S = 1e-3
 #: Consecutive estimates further apart than this many times their usual spacing (the median
 #: over the run, apart for those in motion and those beside a standstill estimate, which may
 #: stand for merged blocks) are a skip: the sensor clock jumped ahead, or data are missing.
@@ -72,6 +76,7 @@ SKIP_SPACINGS = 2.5
 #: After a skip, another offset than the one before it (at least one usual spacing in motion
 #: from it) must match the screw speed this many times better (mean squared difference), over
 #: a time line of at least MIN_LINE_S, to be taken: a short line matches too many offsets.
+#: Both are compared at their best within the fine search (FINE_STEP_S).
 SKIP_MATCH_GAIN = 2.0
 MIN_LINE_S = 2.0
 #: The offset search matches at most this many estimates from the start of a time line (its
@@ -255,18 +260,26 @@ def _clock_offsets(states: list[HealthState], truth: TruthSamples) -> tuple[floa
         truth_speed = np.interp(shifted, truth.stamp_s, truth.screw_speed_rad_s)
         return np.asarray(np.mean((truth_speed - speed[matched][None, :]) ** 2, axis=1))
 
+    def best_near(segment: slice, centre: float, span: float, step: float) -> tuple[float, float]:
+        """The offset within +-span of centre (on a grid of step) that matches best, and its
+        mismatch; ties go to the nearest."""
+        near = np.arange(-span, span + step / 2, step)
+        candidates = centre + near[np.argsort(np.abs(near), kind="stable")]
+        mismatches = mismatch(segment, candidates)
+        best = int(np.argmin(mismatches))
+        return float(candidates[best]), float(mismatches[best])
+
     offsets: list[float] = []
     for segment in lines:
         reset = states[segment.start].event == EstimateEvent.TIME_RESET
         before = 0.0 if reset or not offsets else offsets[-1]
-        best = before
-        for step in (1e-2, 1e-3):
-            span = MAX_CLOCK_OFFSET_S if step == 1e-2 else 2e-2
-            offsets_near = np.arange(-span, span + step / 2, step)
-            candidates = best + offsets_near[np.argsort(np.abs(offsets_near), kind="stable")]
-            best = float(candidates[int(np.argmin(mismatch(segment, candidates)))])  # ties: nearest
+        coarse, _ = best_near(segment, before, MAX_CLOCK_OFFSET_S, COARSE_STEP_S)
+        best, found = best_near(segment, coarse, COARSE_STEP_S * 2.0, FINE_STEP_S)
         if not reset:
-            kept, found = mismatch(segment, np.array([before, best]))
+            # The offset before, compared at its own best within the same fine search: its
+            # estimates' speeds are block means that lag their stamps, so any offset found
+            # (a motion's period further on, say) matched better than it held exactly.
+            _, kept = best_near(segment, before, COARSE_STEP_S * 2.0, FINE_STEP_S)
             long_enough = stamps[segment.stop - 1] - stamps[segment.start] >= MIN_LINE_S
             jumped = abs(best - before) >= moving_spacing and found * SKIP_MATCH_GAIN < kept
             best = best if jumped and long_enough else before
