@@ -22,6 +22,8 @@ from __future__ import annotations
 
 import os
 import shutil
+import struct
+import zlib
 from collections.abc import Mapping, Sequence
 from io import BytesIO
 from pathlib import Path
@@ -50,11 +52,17 @@ from prsm_health.signals import MotorSamples, TruthSamples
 
 #: ``library`` field of the MCAP header (instead of rosbags' ``rosbags-<version>``).
 LIBRARY = "prsm_health.bags (rosbags MCAP writer)"
+#: Where a Chunk record's uncompressed CRC sits: after its opcode and length (9 bytes) and its
+#: message start time, end time and uncompressed size (8 bytes each).
+CHUNK_CRC_OFFSET = 9 + 3 * 8
 MAX_LOG_TIME_NS = 2**63 - 2
 
 
 class _McapStorage(McapWriter):
-    """rosbags' MCAP storage, with :data:`LIBRARY` in the header so bags do not depend on it."""
+    """rosbags' MCAP storage, with :data:`LIBRARY` in the header so bags do not depend on it,
+    and each chunk's CRC-32 of its uncompressed records (rosbags writes 0, "none"): without
+    it a flipped bit that zstd still decodes fed garbage samples to the estimator
+    (docs/bags.md, "Damage")."""
 
     def __init__(self, path: Path, compression: CompressionMode) -> None:
         super().__init__(path, compression)
@@ -67,6 +75,16 @@ class _McapStorage(McapWriter):
         write_string(record, "ros2")
         write_string(record, LIBRARY)
         write_record(self.bio, 0x01, record)
+
+    def close_chunk(self) -> None:
+        """rosbags' chunk record, with the CRC filled in where rosbags wrote 0."""
+        crc = zlib.crc32(self.chunk.bio.getbuffer())
+        start = self.bio.tell()
+        super().close_chunk()
+        end = self.bio.tell()
+        self.bio.seek(start + CHUNK_CRC_OFFSET)
+        self.bio.write(struct.pack("<I", crc))
+        self.bio.seek(end)
 
 
 class _Writer(Writer):

@@ -13,7 +13,12 @@ from mcap.stream_reader import CRCValidationError
 from prsm_health.bags.errors import BagDamagedError, BagError
 from prsm_health.bags.reader import InputTopics, iter_motor_samples, read_motor_samples, read_truth
 from prsm_health.bags.typestore import MOTOR_STATE
-from prsm_health.bags.writer import BagWriter, write_motor_states, write_truth
+from prsm_health.bags.writer import (
+    CHUNK_CRC_OFFSET,
+    BagWriter,
+    write_motor_states,
+    write_truth,
+)
 from prsm_health.signals import MotorSamples
 from test.bags.samples import (
     assert_same,
@@ -149,7 +154,8 @@ def test_corrupt_chunk_size_and_record_length(tmp_path: Path) -> None:
         if compress:  # the announced uncompressed size of the second chunk
             struct.pack_into("<Q", data, second + 9 + 16, 12345)
             reason = "12345 announced"
-        else:  # the length of the first record inside the second chunk
+        else:  # the length of the first record inside the second chunk, its CRC removed
+            struct.pack_into("<I", data, second + CHUNK_CRC_OFFSET, 0)  # as rosbags writes it
             records = second + 9 + 28 + 4 + 8  # times, size, crc, "" compression, records length
             struct.pack_into("<Q", data, records + 1, 2**40)
             reason = "overruns its chunk"
@@ -250,6 +256,32 @@ def test_truth_whose_roller_count_changes(tmp_path: Path, split: bool) -> None:
     truth, error = read_truth(bag, partial_ok=True)
     assert truth is not None and truth.roller_jammed.shape == (before, 5)
     assert error is not None and "roller_jammed has shape (7,), earlier messages (5,)" in str(error)
+
+
+def test_a_bit_flipped_inside_a_compressed_chunk_is_damage(tmp_path: Path) -> None:
+    """Our writer stores each chunk's CRC (rosbags writes 0). Without it, one bit flipped in
+    the second zstd chunk of a bundled bag went unnoticed by 5 of 12 flips that zstd still
+    decoded: up to 256 changed samples were delivered as good. Every flip, anywhere in the
+    compressed records, is now damage named at that chunk; the first chunk is delivered."""
+    motor = with_quantised_stamps(motor_samples(40000))
+    bag = write_bag(tmp_path / "bag", motor=motor)
+    data = mcap_file(bag).read_bytes()
+    second = _chunk_offsets(data)[1]
+    compressed = second + CHUNK_CRC_OFFSET + 4 + 4 + len("zstd") + 8
+    end = second + 9 + struct.unpack_from("<Q", data, second + 1)[0]
+    rng = np.random.default_rng(5)
+    for position, bit in zip(
+        rng.integers(compressed, end, size=12), rng.integers(0, 8, size=12), strict=True
+    ):
+        flipped = bytearray(data)
+        flipped[position] ^= 1 << int(bit)
+        path = tmp_path / "flipped.mcap"
+        path.write_bytes(bytes(flipped))
+        partial, error = read_motor_samples(path, partial_ok=True)
+        assert error is not None, f"bit {bit} of byte {position} flipped, no damage reported"
+        assert f"Chunk record at byte {second} " in str(error)
+        assert 0 < len(partial) < len(motor)
+        assert_same(partial, motor[0 : len(partial)])
 
 
 def test_a_chunk_failing_its_crc_check_is_damage(tmp_path: Path) -> None:

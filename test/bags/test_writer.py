@@ -9,6 +9,8 @@ from typing import Any
 import numpy as np
 import pytest
 from mcap.reader import make_reader
+from mcap.records import Chunk
+from mcap.stream_reader import StreamReader
 from mcap_ros2.decoder import DecoderFactory
 from rosbags.rosbag2 import Reader
 
@@ -126,7 +128,7 @@ def test_mcap_ros2_decodes_every_message_from_the_embedded_schemas(
     bag, expected = full_bag
     got: dict[str, list[tuple[Any, ...]]] = {topic: [] for topic in expected}
     with mcap_file(bag).open("rb") as stream:
-        reader = make_reader(stream, decoder_factories=[DecoderFactory()])
+        reader = make_reader(stream, decoder_factories=[DecoderFactory()], validate_crcs=True)
         assert reader.get_header().library == LIBRARY
         summary = reader.get_summary()
         assert summary is not None
@@ -135,6 +137,10 @@ def test_mcap_ros2_decodes_every_message_from_the_embedded_schemas(
             got[channel.topic].append(_row(channel.topic, message))
     for topic, rows in expected.items():
         _same_rows(got[topic], rows)
+    with mcap_file(bag).open("rb") as stream:  # every chunk has a CRC (rosbags writes 0)
+        records = StreamReader(stream, emit_chunks=True, validate_crcs=True).records
+        crcs = [record.uncompressed_crc for record in records if isinstance(record, Chunk)]
+    assert crcs and all(crcs)
 
 
 def test_log_times_follow_the_stamps_or_the_receive_times(tmp_path: Path) -> None:
