@@ -64,7 +64,8 @@ class MotorSamples:
 
     stamp_s: header stamp [s] (may jitter, repeat or go backwards in faulty data).
     current_a: motor current [A]. speed_rad_s: motor speed [rad/s].
-    position_rad: motor position, multi-turn (not wrapped) [rad].
+    position_rad: motor position [rad], counting turns, or wrapped into one turn (a
+    single-turn encoder: the estimator adds the turns from the speeds).
     Values are as received: NaN, inf and out-of-range samples are the estimator's to reject.
     Every column is held as a float64 ndarray (converted on construction: :func:`_float64_columns`).
     """

@@ -227,6 +227,7 @@ class SampleBlocker:
         self._last_sample_position = math.nan  # and its motor position
         self._last_sample_speed = math.nan  # and its motor speed
         self._wrapped = False  # the positions wrapped into one turn (WRAPPED_WITHIN_RAD)
+        self._position_turns_rad = 0.0  # the whole turns taken off them so far (unwrapped)
         self._last_processed_stamp = math.inf  # the last one of a block, rejected or not
         self._time_reset = False
         self._previous_current = math.nan  # last sample before the pending ones
@@ -525,7 +526,8 @@ class SampleBlocker:
         t0 = run.stamp_s[starts]
         t = run.stamp_s - np.repeat(t0, counts)
         w = run.speed_rad_s
-        angle = run.position_rad * self._carrier_per_motor_rad
+        wrapped_until, turning = self._turning_positions(run)
+        angle = turning * self._carrier_per_motor_rad
 
         def means(x: FloatArray) -> FloatArray:
             return np.asarray(np.add.reduceat(x, starts) / counts, dtype=np.float64)
@@ -562,14 +564,9 @@ class SampleBlocker:
         first_stamps = run.stamp_s[starts]
         last_stamps = run.stamp_s[last]
         last_positions = run.position_rad[last]
-        # Travel is measured only until the positions are seen to wrap into one turn (sample
-        # by sample, so whatever the chunks): a wrapped position says little of it.
-        position = np.r_[self._last_sample_position, run.position_rad]
-        near = np.abs(position) <= WRAPPED_WITHIN_RAD
-        with np.errstate(invalid="ignore"):
-            wraps = (np.abs(np.diff(position)) > math.pi) & near[1:] & near[:-1]
-        wrapped = np.logical_or.accumulate(np.r_[self._wrapped, wraps])[1:][last]
-        self._wrapped = bool(wrapped[-1])
+        # Travel is measured only until the positions are seen to wrap into one turn: the
+        # difference of two wrapped positions says nothing of the turns across a hole.
+        wrapped = wrapped_until[last]
         blocks = []
         for b in range(len(starts)):
             previous = self._last_block_stamp
@@ -615,6 +612,42 @@ class SampleBlocker:
             self._last_sample_speed = float(w[last[b]])
             self._time_reset = False
         return blocks
+
+    def _turning_positions(self, run: MotorSamples) -> tuple[BoolArray, FloatArray]:
+        """Per sample of ``run``: whether the positions have been seen to wrap into one turn by
+        then (two consecutive ones within WRAPPED_WITHIN_RAD of zero that differ by more than
+        half a turn; sample by sample, so whatever the chunks), and its position counting
+        turns, for the carrier angle.
+
+        Once wrapped (a single-turn encoder), whole turns are added where two consecutive
+        positions within WRAPPED_WITHIN_RAD of zero differ from the travel their speeds say
+        (mean speed times the time between them, none across a time reset) by half a turn or
+        more. Exact between samples less than half a turn of travel apart; across a hole the
+        speeds' travel is a guess, and so is the carrier's phase after it. Multi-turn
+        positions are left as they are. Wrapped positions taken as they were made the carrier
+        angle meaningless: 5 false jam declarations and a load RMSE of 6.2 % instead of 0.6 %
+        on the sudden-jam bag with its positions wrapped into [-pi, pi).
+        """
+        position = np.r_[self._last_sample_position, run.position_rad]
+        near = np.abs(position) <= WRAPPED_WITHIN_RAD
+        near_both = near[1:] & near[:-1]
+        step = np.diff(position)
+        with np.errstate(invalid="ignore"):
+            wraps = (np.abs(step) > math.pi) & near_both
+        wrapped = np.logical_or.accumulate(np.r_[self._wrapped, wraps])[1:]
+        self._wrapped = bool(wrapped[-1])
+        if not wrapped.any():
+            return wrapped, run.position_rad
+        speed = np.r_[self._last_sample_speed, run.speed_rad_s]
+        before = self._last_sample_stamp
+        stamp = np.r_[run.stamp_s[0] if before is None else before, run.stamp_s]
+        travel = 0.5 * (speed[1:] + speed[:-1]) * np.maximum(np.diff(stamp), 0.0)
+        with np.errstate(invalid="ignore"):
+            turns = np.round((step - travel) / (2.0 * math.pi))
+        turns = np.where(wrapped & near_both & np.isfinite(turns), turns, 0.0)
+        offset = self._position_turns_rad + 2.0 * math.pi * np.cumsum(turns)
+        self._position_turns_rad = float(offset[-1])
+        return wrapped, np.asarray(run.position_rad - offset, dtype=np.float64)
 
 
 def _variance_about_trend(

@@ -271,6 +271,29 @@ def test_a_position_re_homed_to_zero_is_a_jump_not_a_wrap(size: int) -> None:
     assert all(math.isnan(b.travel_rad) for b in blocks)
 
 
+@pytest.mark.parametrize("size", [1, 7, 2000])
+def test_a_position_wrapped_into_one_turn_gives_the_carrier_angle_of_the_turns(size: int) -> None:
+    """A single-turn encoder: the positions wrapped into [-pi, pi) (or [0, 2 pi)) give the
+    blocks the carrier angle of the positions counting turns, across a 0.25 s dropout too
+    (whole turns from the speeds), whatever the chunks. Taken as they were they made the
+    carrier angle meaningless (5 false jam declarations on the sudden-jam bag)."""
+    samples = run(2.0)
+    keep = np.ones(len(samples), dtype=bool)
+    keep[700:950] = False
+    samples = samples[keep]
+    turns, _ = feed_in_chunks(samples, len(samples))
+    for wrapped in (
+        np.mod(samples.position_rad + math.pi, 2.0 * math.pi) - math.pi,
+        np.mod(samples.position_rad, 2.0 * math.pi),
+    ):
+        blocks, _ = feed_in_chunks(dataclasses.replace(samples, position_rad=wrapped), size)
+        assert len(blocks) == len(turns)
+        for field in ("carrier_cos", "carrier_sin"):
+            got = [getattr(b, field) for b in blocks]
+            assert got == pytest.approx([getattr(b, field) for b in turns], abs=1e-9)
+    assert np.ptp([b.carrier_cos for b in turns]) > 1.0  # the carrier turns in the run
+
+
 @pytest.mark.parametrize("size", [1, 7, 501, 2000])
 def test_one_stamp_far_ahead_is_rejected_not_the_samples_after_it(size: int) -> None:
     """One sample stamped 30 years ahead in a clean stream: it is rejected as out of order,
