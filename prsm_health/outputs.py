@@ -29,6 +29,7 @@ from typing import Any
 
 from prsm_health.estimation.estimate import S_PER_H, UM_PER_M, HealthState
 from prsm_health.estimation.params import DiagnosticThresholds
+from prsm_health.estimation.position_speed import disagreement
 
 #: Input stamps that advance more than this many times faster or slower than the node's clock
 #: are a clock in the wrong unit (ms or us read as s, a tick counter), not a bag played fast.
@@ -124,6 +125,9 @@ class InputHealth:
     replay). speed_noise_std_rad_s: the motor speed's noise the estimator measured in motion
     (:attr:`HealthEstimator.speed_noise_std_rad_s
     <prsm_health.estimation.estimator.HealthEstimator.speed_noise_std_rad_s>`; None: not yet).
+    position_per_speed: how far the motor position moves per radian the speed says, measured
+    in motion (1 when they agree; :attr:`HealthEstimator.position_per_speed
+    <prsm_health.estimation.estimator.HealthEstimator.position_per_speed>`; None: not yet).
     """
 
     rate_hz: float
@@ -138,6 +142,7 @@ class InputHealth:
     stamp_rate: float = -1.0
     input_clock_s: float | None = None
     speed_noise_std_rad_s: float | None = None
+    position_per_speed: float | None = None
 
 
 @dataclass(frozen=True)
@@ -334,15 +339,18 @@ def _inputs(inputs: InputHealth, th: DiagnosticThresholds, now_s: float) -> _Par
             "stamps before 1970 (negative): the estimates go out stamped 0, as a ROS time"
             " cannot be negative (estimate_stamp_s has their own)"
         )
+    if (wrong := disagreement(inputs.position_per_speed)) is not None:
+        problems.append(wrong)
     fraction = inputs.recent_rejected_fraction
     if fraction > 0.0 and fraction >= th.rejected_warn_fraction:
         reasons = ", ".join(k for k, v in inputs.recent_rejected.items() if v)
         problems.append(f"{100.0 * fraction:.1f} % rejected in the last second ({reasons})")
     rejected_total = sum(inputs.rejected.values())
-    noise = inputs.speed_noise_std_rad_s
+    noise, ratio = inputs.speed_noise_std_rad_s, inputs.position_per_speed
     message = "; ".join(problems) or (
         f"{inputs.rate_hz:.0f} Hz, {rejected_total} rejected of {inputs.received} received"
         + ("" if noise is None else f", speed noise {noise:.2f} rad/s")
+        + ("" if ratio is None else f", position per speed {ratio:.2f}")
     )
     values = {
         "rate_hz": inputs.rate_hz,
@@ -354,6 +362,7 @@ def _inputs(inputs: InputHealth, th: DiagnosticThresholds, now_s: float) -> _Par
         "recent_rejected_fraction": inputs.recent_rejected_fraction,
         "stamp_rate": inputs.stamp_rate,
         "speed_noise_std_rad_s": -1.0 if noise is None else noise,
+        "position_per_speed": -1.0 if ratio is None else ratio,
     }
     values.update({f"rejected_{reason}": count for reason, count in inputs.rejected.items()})
     return (Level.WARN if problems else Level.OK), message, _numbers(values)

@@ -83,8 +83,9 @@ class ReplayResult:
     before it), or None; inputs_complete: every input sample was read all the same (the
     damage is in the truth only). stopped: the replay was stopped before the end of the bag
     (the same). elapsed_s: wall time of reading and estimating (without writing ``out`` or
-    scoring). speed_noise_std_rad_s: the speed noise the estimator measured in motion (None:
-    too little motion).
+    scoring). speed_noise_std_rad_s: the speed noise the estimator measured in motion, and
+    position_per_speed how far the position moves per radian the speed says (None: too little
+    motion).
     """
 
     states: list[HealthState]
@@ -97,6 +98,7 @@ class ReplayResult:
     elapsed_s: float
     inputs_complete: bool = True
     speed_noise_std_rad_s: float | None = None
+    position_per_speed: float | None = None
 
 
 def _chunks(bag: Path, topics: InputTopics, damage: list[BagError]) -> Iterator[MotorSamples]:
@@ -186,6 +188,7 @@ def replay(
         elapsed_s=elapsed,
         inputs_complete=inputs_complete,
         speed_noise_std_rad_s=estimator.speed_noise_std_rad_s,
+        position_per_speed=estimator.position_per_speed,
     )
 
 
@@ -316,6 +319,7 @@ class _Output:
         self._unplaced = 0
         self._diagnostics.inputs.judge(now, counters.accepted, rejected_by_reason(counters, {}))
         self._diagnostics.inputs.speed_noise_std_rad_s = estimator.speed_noise_std_rad_s
+        self._diagnostics.inputs.position_per_speed = estimator.position_per_speed
         self._diagnostics.events.observe(now, states, counters)
         self._diagnostics.events.non_finite(now, replaced)
         due, written = self._diagnostics_due_s, self._diagnostics_written_s

@@ -34,6 +34,7 @@ from prsm_health.estimation.params import (
     load_params_mapping,
     params_from_mapping,
 )
+from prsm_health.estimation.position_speed import disagreement
 from prsm_health.estimation.speed_noise import HISTORY_BLOCKS
 from prsm_health.interrupt import (
     EXIT_INTERRUPTED,
@@ -361,11 +362,23 @@ def _rejected_why(bag: Path, topics: InputTopics, result: ReplayResult) -> str:
     )
 
 
-def _speed_noise(result: ReplayResult) -> str:
-    """The speed noise measured in motion, or why there is none."""
-    if result.speed_noise_std_rad_s is None:
-        return f"speed noise not measured (under {HISTORY_BLOCKS} blocks in motion)"
-    return f"speed noise {result.speed_noise_std_rad_s:.2f} rad/s in motion"
+def _measured_in_motion(result: ReplayResult) -> str:
+    """The speed noise and the position's agreement with the speed, measured in motion, or
+    why they are not."""
+    few = f"(under {HISTORY_BLOCKS} blocks in motion)"
+    noise, ratio = result.speed_noise_std_rad_s, result.position_per_speed
+    parts = [
+        f"speed noise not measured {few}"
+        if noise is None
+        else f"speed noise {noise:.2f} rad/s in motion"
+    ]
+    if ratio is None:
+        parts.append(f"position and speed not compared {few}")
+    elif (wrong := disagreement(ratio)) is not None:
+        parts.append(f"WRONG INPUT: {wrong}")
+    else:
+        parts.append(f"position per speed {ratio:.3f}")
+    return "; ".join(parts)
 
 
 def summary(bag: Path, source: str, result: ReplayResult) -> str:
@@ -376,7 +389,8 @@ def summary(bag: Path, source: str, result: ReplayResult) -> str:
         f"{bag}: {result.samples} samples, {len(result.states)} estimates in "
         f"{result.elapsed_s:.2f} s ({rate:,.0f} samples/s); parameters: {source}",
         f"  samples accepted {counters.accepted}, rejected {counters.rejected_total} "
-        f"(time resets {counters.time_resets}, gaps {counters.gaps}); {_speed_noise(result)}",
+        f"(time resets {counters.time_resets}, gaps {counters.gaps}); "
+        + _measured_in_motion(result),
     ]
     if result.damage is not None:
         covered = "estimates cover" if result.states else "no estimate from"

@@ -46,12 +46,14 @@ class InputTracker:
     this run: totals an estimator brings from a restored state are its starting point
     (:meth:`start_from`), not samples judged now. ``topic``: where the inputs come from (named
     by the input-health status; empty if unknown). ``speed_noise_std_rad_s``: the motor speed's
-    noise the estimator measured in motion, as the caller last read it (None: not yet).
+    noise the estimator measured in motion, and ``position_per_speed`` how far the position
+    moves per radian the speed says, as the caller last read them (None: not yet).
     """
 
     def __init__(self) -> None:
         self.topic = ""
         self.speed_noise_std_rad_s: float | None = None
+        self.position_per_speed: float | None = None
         self._received_total = 0
         self._last_sample_s: float | None = None
         # When the first sample was rejected since one was last accepted (None: none since).
@@ -173,6 +175,7 @@ class InputTracker:
             stamp_rate=self._stamp_rate(),
             input_clock_s=self._input_clock_s,
             speed_noise_std_rad_s=self.speed_noise_std_rad_s,
+            position_per_speed=self.position_per_speed,
         )
 
     def _stamp_rate(self) -> float:

@@ -184,6 +184,14 @@ def test_input_health_rate_and_rejections() -> None:
     level, message, values = statuses(i=inputs(speed_noise_std_rad_s=1.853))[INPUT_HEALTH]
     assert level == Level.OK and message.endswith(" received, speed noise 1.85 rad/s")
     assert values["speed_noise_std_rad_s"] == "1.853"
+    assert values["position_per_speed"] == "-1"  # not measured yet
+    level, message, values = statuses(i=inputs(position_per_speed=1.04))[INPUT_HEALTH]
+    assert level == Level.OK and message.endswith(" received, position per speed 1.04")
+    assert values["position_per_speed"] == "1.04"
+    # A position of the screw's behind a 5:1 gear (position_speed.py)
+    level, message, _ = statuses(i=inputs(position_per_speed=0.2))[INPUT_HEALTH]
+    assert level == Level.WARN
+    assert message.startswith("the position moves 0.2 rad per rad the speed says (a unit")
     level, message, _ = statuses(i=inputs(rate_hz=20.0))[INPUT_HEALTH]
     assert level == Level.WARN
     assert "20 Hz" in message

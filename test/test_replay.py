@@ -882,13 +882,24 @@ def test_an_output_that_fails_to_write_still_gets_the_summary_printed(
     captured = capsys.readouterr()
     assert code == 2 and "--report: cannot write into" in captured.err
     assert "samples accepted 12000" in captured.out
-    assert re.search(r"; speed noise 0\.\d\d rad/s in motion\n", captured.out)
+    assert re.search(
+        r"; speed noise 0\.\d\d rad/s in motion; position per speed (0\.99\d|1\.00\d)\n",
+        captured.out,
+    )
 
 
-def test_the_summary_says_when_the_speed_noise_was_not_measured(bag: Path) -> None:
-    result = dataclasses.replace(replay(bag, params()), speed_noise_std_rad_s=None)
-    text = replay_command.summary(bag, "x", result)
-    assert "; speed noise not measured (under 64 blocks in motion)\n" in text
+def test_the_summary_says_what_was_not_measured_and_a_position_that_disagrees(
+    bag: Path,
+) -> None:
+    result = replay(bag, params())
+    unmeasured = dataclasses.replace(result, speed_noise_std_rad_s=None, position_per_speed=None)
+    text = replay_command.summary(bag, "x", unmeasured)
+    assert (
+        "; speed noise not measured (under 64 blocks in motion); position and speed not "
+        "compared (under 64 blocks in motion)\n"
+    ) in text
+    wrong = replay_command.summary(bag, "x", dataclasses.replace(result, position_per_speed=0.2))
+    assert "; WRONG INPUT: the position moves 0.2 rad per rad the speed says (a unit" in wrong
 
 
 def test_the_time_label_names_each_clock_jumps_shift_once() -> None:

@@ -100,6 +100,13 @@ class HealthEstimator:
         return self._blocker.speed_noise.measured_std_rad_s
 
     @property
+    def position_per_speed(self) -> float | None:
+        """How far the motor position moves per radian of the speeds' travel, measured in
+        motion (1 when they agree; :mod:`prsm_health.estimation.position_speed`), None
+        before."""
+        return self._blocker.position_per_speed.ratio
+
+    @property
     def log_evidence(self) -> float:
         """log p(y) of the blocks that weighed the jam counts so far, under the filter bank's
         model (the sum of the log normalisers of the counts' probabilities)."""

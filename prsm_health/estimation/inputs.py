@@ -33,6 +33,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from prsm_health.estimation.params import EstimatorParams
+from prsm_health.estimation.position_speed import PositionPerSpeed
 from prsm_health.estimation.speed_noise import MIN_SAMPLES, SpeedNoise
 from prsm_health.physics.meshing import carrier_speed_rad_s
 from prsm_health.signals import BoolArray, FloatArray, IntArray, MotorSamples
@@ -235,6 +236,7 @@ class SampleBlocker:
         self._previous_spike_like = np.zeros(2, dtype=np.bool_)
         self._stuck_run = 0  # length of the identical-current run ending there
         self.speed_noise = SpeedNoise(params.noise.speed_std_rad_s)
+        self.position_per_speed = PositionPerSpeed()
 
     @property
     def input_clock_s(self) -> float | None:
@@ -554,6 +556,14 @@ class SampleBlocker:
             counts, counts - 2.0, out=np.ones(len(counts)), where=measured
         )
         noise_var = self.speed_noise.variances(unbiased, measured)
+        # Each block's travel by its speeds: the trapezoids between its consecutive samples.
+        trapezoids = np.r_[0.5 * (w[1:] + w[:-1]) * np.diff(run.stamp_s), 0.0]
+        trapezoids[last] = 0.0  # from a block's last sample to the next block's first
+        self.position_per_speed.add(
+            turning[last] - turning[starts],
+            np.add.reduceat(trapezoids, starts),
+            (direction != 0) & (counts >= 2),
+        )
         slope_var = np.divide(2.0 * noise_var, span**2, out=np.zeros_like(span), where=measurable)
         stamps = t0 + mean_t
         torque = mean_i * self._torque_constant

@@ -773,8 +773,13 @@ def test_demo_runs_node_player_and_monitor(tmp_path: Path) -> None:
     assert accepted and received and received[1] == accepted[1], summary
     # The speed noise the node's estimator measured in motion: the scene's drive differences
     # a 4096-count encoder (docs/performance.md, "The drive's sensors").
-    noise = re.search(r"input health: .* received, speed noise (\d+\.\d+) rad/s", summary)
+    noise = re.search(
+        r"input health: .* received, speed noise (\d+\.\d+) rad/s, position per speed "
+        r"(\d+\.\d+)",
+        summary,
+    )
     assert noise and 0.4 < float(noise[1]) < 0.55, summary
+    assert float(noise[2]) == 1.0, summary  # the scene's position and speed agree
     assert "STALE" not in summary
     # Which estimate the statuses report (they showed another load than the line above).
     assert re.search(r"\ndiagnostics of the estimate at bag time \d+\.\d{3} s:\n", summary)
