@@ -647,19 +647,27 @@ def test_monitor_shows_foreign_messages_as_they_are(ros: None) -> None:
     ]
     command = [sys.executable, "-m", "prsm_health", "monitor", "--node", name, "--count"]
     shown = subprocess.Popen(
-        [*command, "3", "--timeout", "60", "--hardware-id", "odd"],
+        [*command, "5", "--timeout", "60", "--hardware-id", "odd"],
         stdout=subprocess.PIPE,
         stderr=subprocess.PIPE,
         text=True,
     )
-    asked = subprocess.Popen(
-        [*command, "1", "--timeout", "15"],
-        stdout=subprocess.PIPE,
-        stderr=subprocess.PIPE,
-        text=True,
-    )
+    asked = None
     try:
         deadline = time.monotonic() + 90.0
+        # The second monitor starts once the first one's subscriptions are matched: its own
+        # made the publishing start while the first one saw only the diagnostics (a CI run
+        # printed three records, each "no estimate received").
+        while asked is None and shown.poll() is None and time.monotonic() < deadline:
+            if health.get_subscription_count() and diagnostics.get_subscription_count():
+                asked = subprocess.Popen(
+                    [*command, "1", "--timeout", "15"],
+                    stdout=subprocess.PIPE,
+                    stderr=subprocess.PIPE,
+                    text=True,
+                )
+            executor.spin_once(timeout_sec=0.2)
+        assert asked is not None, "the first monitor never subscribed"
         while None in (shown.poll(), asked.poll()) and time.monotonic() < deadline:
             if health.get_subscription_count() and diagnostics.get_subscription_count():
                 health.publish(HealthEstimate())
@@ -669,7 +677,8 @@ def test_monitor_shows_foreign_messages_as_they_are(ros: None) -> None:
         asked_out, asked_err = asked.communicate(timeout=20)
     finally:
         stop_process(shown)
-        stop_process(asked)
+        if asked is not None:
+            stop_process(asked)
         executor.shutdown()
         node.destroy_node()
     assert (shown.returncode, err) == (0, "")
