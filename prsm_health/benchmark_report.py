@@ -29,6 +29,7 @@ from prsm_health.benchmark import (
     Timing,
     WearRun,
 )
+from prsm_health.estimation.metrics import CalibrationBin
 
 #: The floors' thresholds (issue 6).
 NAIVE_SPEEDUP = 50.0
@@ -75,6 +76,24 @@ def pooled_rmse_percent(runs: Iterable[ScoredRun]) -> float:
         return math.nan
     squares = sum(r.metrics.moving_estimates * r.rmse_percent_largest**2 for r in chosen)
     return math.sqrt(squares / sum(r.metrics.moving_estimates for r in chosen))
+
+
+def pooled_calibration(runs: Iterable[ScoredRun]) -> list[CalibrationBin]:
+    """The jam count's calibration bins (Metrics.jam_calibration) summed over several runs."""
+    pooled: list[CalibrationBin] = []
+    for bins in zip(*(r.metrics.jam_calibration for r in runs), strict=True):
+        estimates = sum(b.estimates for b in bins)
+        weighted = sum(b.mean_probability * b.estimates for b in bins if b.estimates)
+        pooled.append(
+            CalibrationBin(
+                low=bins[0].low,
+                high=bins[0].high,
+                estimates=estimates,
+                correct=sum(b.correct for b in bins),
+                mean_probability=weighted / estimates if estimates else math.nan,
+            )
+        )
+    return pooled
 
 
 def _mark(passed: bool | None) -> str:
@@ -649,6 +668,38 @@ def _told(results: BenchResults) -> list[str]:
     return _table(header, rows)
 
 
+def _probability(p: float) -> str:
+    """A probability; near 1 as 1 minus its complement, which ``.6f`` rounds away."""
+    if not math.isfinite(p):
+        return "-"
+    return f"1 - {1.0 - p:.1e}" if p > 0.999 else f"{p:.3f}"
+
+
+def _calibration(results: BenchResults) -> list[str]:
+    """The jam count's probabilities against how often the most likely count was right,
+    pooled over the default's full runs, those with jams and those without."""
+    runs = results.runs_of(config="default")
+    groups = {
+        "with jams": [r for r in runs if r.metrics.jams],
+        "without": [r for r in runs if not r.metrics.jams],
+    }
+    pooled = {name: pooled_calibration(chosen) for name, chosen in groups.items() if chosen}
+    rows = []
+    for i, first in enumerate(next(iter(pooled.values()), [])):
+        closed = "]" if first.high == 1.0 else ")"
+        row = [f"[{first.low:g}, {first.high:g}{closed}"]
+        for bins in pooled.values():
+            b = bins[i]
+            right = f"{100.0 * b.correct / b.estimates:.2f}" if b.estimates else "-"
+            row += [str(b.estimates), _probability(b.mean_probability), right]
+        rows.append(row)
+    header = ["p of the most likely count"]
+    for name, chosen in groups.items():
+        if name in pooled:
+            header += [f"{name} ({len(chosen)} runs)", "mean p", "right %"]
+    return _table(header, rows)
+
+
 def _wear(results: BenchResults) -> list[str]:
     rows = [
         [
@@ -739,6 +790,16 @@ def markdown(results: BenchResults, found: list[Floor]) -> str:
             "",
             *_told(results),
         ]
+    lines += [
+        "",
+        "## Jam count's probabilities (default configuration)",
+        "",
+        "The estimates per bin of their most likely count's probability, the bin's mean",
+        "probability, and how often that count was the true one (metrics.CalibrationBin):",
+        "honest probabilities are right about as often as they say.",
+        "",
+        *_calibration(results),
+    ]
     lines += ["", "## Precision loss (default configuration)", "", *_wear(results)]
     lines += ["", "## Every full run", "", *_runs_table(results.runs_of(), DETAIL_COLUMNS), ""]
     return "\n".join(lines)

@@ -46,6 +46,7 @@ from prsm_health.benchmark_report import (
     configuration_styles,
     floors,
     markdown,
+    pooled_calibration,
     pooled_rmse_percent,
     run_label,
     write_results,
@@ -201,6 +202,8 @@ def test_files_hold_the_measured_numbers(results: BenchResults, tmp_path: Path) 
     for floor in found:
         assert floor.name in text
     assert "tiny-bag" in text and "radial-off" in text
+    assert "## Jam count's probabilities (default configuration)" in text
+    assert re.search(r"\n\| \[0\.99999, 1\] \| \d+ \| 1 - \d\.\de-\d\d \| \d+\.\d\d \|", text)
     (row,) = [
         line for line in text.splitlines() if line.startswith("| precision loss with the true")
     ]
@@ -272,6 +275,12 @@ def test_floors_follow_their_thresholds(results: BenchResults) -> None:
     hour = next(f for name, f in by_name.items() if "one hour" in name)
     naive = next(f for name, f in by_name.items() if "faster per sample than naive" in name)
     assert hour.passed is None and naive.passed is None
+    pooled = pooled_calibration(default)
+    assert [b.estimates for b in pooled] == [
+        sum(r.metrics.jam_calibration[i].estimates for r in default) for i in range(len(pooled))
+    ]
+    assert sum(b.estimates for b in pooled) == sum(r.metrics.estimates for r in default)
+    assert sum(b.correct for b in pooled) <= sum(b.estimates for b in pooled)
     assert pooled_rmse_percent(default) == pytest.approx(
         math.sqrt(
             sum(r.metrics.moving_estimates * r.rmse_percent_largest**2 for r in default)

@@ -25,6 +25,9 @@ Definitions:
   (None if never); an increase after the last estimate's block was not seen and is not scored
   (a replay that ended early: stopped, or a bag damaged before its truth ends); a false
   declaration is each onset of a most likely count above the true one;
+- the jam count's probabilities: how often the most likely count is the true one, per bin
+  of its probability (CALIBRATION_EDGES): where the probabilities are honest, about as often
+  as they say (:class:`CalibrationBin`);
 - precision loss: the final error (absolute and relative to the final truth), and the
   fraction of estimates whose truth lies within +-2 std.
 
@@ -79,6 +82,9 @@ SKIP_SPACINGS = 2.5
 #: Both are compared at their best within the fine search (FINE_STEP_S).
 SKIP_MATCH_GAIN = 2.0
 MIN_LINE_S = 2.0
+#: The bins of the most likely jam count's probability whose estimates are counted right and
+#: wrong (Metrics.jam_calibration): [0, 0.5), [0.5, 0.9), ..., [0.99999, 1].
+CALIBRATION_EDGES = (0.0, 0.5, 0.9, 0.99, 0.999, 0.99999, 1.0)
 #: The offset search matches at most this many estimates from the start of a time line (its
 #: candidates times these estimates are held at once: an hour's line would take gigabytes).
 MATCHED_ESTIMATES = 1000
@@ -91,6 +97,19 @@ class JamDetection:
     onset_s: float
     count: int
     delay_s: float | None
+
+
+@dataclass(frozen=True)
+class CalibrationBin:
+    """The estimates whose most likely jam count had a probability in [low, high) (the last
+    bin includes 1): how many, how many of them had the true count as the most likely, and
+    the mean of that probability. Honest probabilities have correct / estimates near it."""
+
+    low: float
+    high: float
+    estimates: int
+    correct: int
+    mean_probability: float
 
 
 @dataclass(frozen=True)
@@ -120,6 +139,7 @@ class Metrics:
     clock_offsets_s: tuple[float, ...] = ()
     #: Estimates outside the truth's span, not scored (module docstring).
     estimates_beyond_truth: int = 0
+    jam_calibration: tuple[CalibrationBin, ...] = ()
 
     def to_dict(self) -> dict[str, object]:
         """JSON-able form (``--metrics-json``): a value that could not be computed (NaN, e.g. a
@@ -176,6 +196,7 @@ def score(
     seen_until = np.r_[(stamps[:-1] + stamps[1:]) / 2.0, stamps[-1]]
     true_count = truth.jammed_rollers[_truth_at(truth, seen_until)]
     jams = _jam_detections(truth, seen_until, estimated_count)
+    top_probability = np.array([max(s.jam_probabilities) for s in states])
     over = estimated_count > true_count
     onsets = int(np.count_nonzero(over[1:] & ~over[:-1]) + int(over[0]))
     durations = np.diff(stamps, append=stamps[-1])
@@ -213,7 +234,31 @@ def score(
         precision_loss_coverage_2sigma=float(np.mean(covered)),
         clock_offsets_s=offsets,
         estimates_beyond_truth=beyond,
+        jam_calibration=_calibration(top_probability, estimated_count == true_count),
     )
+
+
+def _calibration(
+    top_probability: FloatArray, correct: NDArray[np.bool_]
+) -> tuple[CalibrationBin, ...]:
+    """The estimates per bin of CALIBRATION_EDGES of their most likely count's probability,
+    and how many of them had the true count as the most likely."""
+    edges = np.array(CALIBRATION_EDGES)
+    bins = np.clip(np.searchsorted(edges, top_probability, side="right") - 1, 0, len(edges) - 2)
+    found = []
+    for b in range(len(edges) - 1):
+        inside = bins == b
+        count = int(np.count_nonzero(inside))
+        found.append(
+            CalibrationBin(
+                low=float(edges[b]),
+                high=float(edges[b + 1]),
+                estimates=count,
+                correct=int(np.count_nonzero(correct[inside])),
+                mean_probability=float(top_probability[inside].mean()) if count else math.nan,
+            )
+        )
+    return tuple(found)
 
 
 def _nothing_scored(beyond: int, offsets: tuple[float, ...]) -> Metrics:
@@ -230,6 +275,7 @@ def _nothing_scored(beyond: int, offsets: tuple[float, ...]) -> Metrics:
         false_jam_seconds=0.0,
         clock_offsets_s=offsets,
         estimates_beyond_truth=beyond,
+        jam_calibration=(),
     )
     return Metrics(**values)
 

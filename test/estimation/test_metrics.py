@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import dataclasses
+import itertools
 import math
 from typing import Any
 
@@ -10,7 +11,7 @@ import numpy as np
 import pytest
 
 from prsm_health.estimation.estimate import EstimateEvent, HealthState
-from prsm_health.estimation.metrics import on_truth_clock, score
+from prsm_health.estimation.metrics import CALIBRATION_EDGES, on_truth_clock, score
 from prsm_health.signals import TruthSamples
 
 N_ROLLERS = 10
@@ -289,6 +290,34 @@ def test_a_periodic_motion_after_a_gap_keeps_its_offset() -> None:
     metrics = score(states, run, rated_load_n=55e3, largest_screw_speed_rad_s=73.3)
     assert metrics.clock_offsets_s == (0.0,)
     assert metrics.load_rmse_n < 1.0
+
+
+def test_the_jam_counts_probabilities_are_scored_per_bin() -> None:
+    """Per bin of the most likely count's probability: how many estimates, how many of them
+    right. A jam at 5 s: before it two estimates at p 0.6 (one says 1: wrong), after it
+    three at p 1 - 1e-9 that say 0 (wrong) and two that say 1 at p 0.95 (right)."""
+
+    def at(stamp: float, count: int, p: float) -> HealthState:
+        probabilities = [0.0] * (N_ROLLERS + 1)
+        probabilities[count], probabilities[1 - count] = p, 1.0 - p
+        return dataclasses.replace(
+            state(stamp, 20e3, 100.0, count, 0.0), jam_probabilities=tuple(probabilities)
+        )
+
+    states = [at(1.0, 0, 0.6), at(2.0, 1, 0.6)]
+    states += [at(t, 0, 1.0 - 1e-9) for t in (6.0, 7.0, 8.0)] + [at(9.0, 1, 0.95), at(9.5, 1, 0.95)]
+    metrics = score(states, truth(10.0, 5.0), rated_load_n=55e3, largest_screw_speed_rad_s=73.3)
+    bins = {(b.low, b.high): b for b in metrics.jam_calibration}
+    assert [(b.low, b.high) for b in metrics.jam_calibration] == list(
+        itertools.pairwise(CALIBRATION_EDGES)
+    )
+    assert (bins[0.5, 0.9].estimates, bins[0.5, 0.9].correct) == (2, 1)
+    assert bins[0.5, 0.9].mean_probability == pytest.approx(0.6)
+    assert (bins[0.9, 0.99].estimates, bins[0.9, 0.99].correct) == (2, 2)
+    assert (bins[0.99999, 1.0].estimates, bins[0.99999, 1.0].correct) == (3, 0)
+    assert sum(b.estimates for b in metrics.jam_calibration) == len(states)
+    assert math.isnan(bins[0.0, 0.5].mean_probability)
+    assert metrics.to_dict()["jam_calibration"][0]["mean_probability"] is None
 
 
 def test_estimates_beyond_the_truths_end_are_not_scored() -> None:
