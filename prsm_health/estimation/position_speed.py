@@ -6,12 +6,13 @@ last sample, the turns of wrapped positions added: inputs.py) to the travel its 
 (their trapezoidal integral over the same samples). The ratio reported is the median of the
 last ``speed_noise.HISTORY_BLOCKS`` of them: 1 when both are of the motor shaft, in radians.
 A position in degrees reads 57.3, in turns 0.159; a position of the screw's reads one over
-the gear ratio, a speed of the screw's the gear ratio. Nothing else checks such a mistake,
-and the estimator runs on with it: on the sudden-jam bag (gear 5:1) a position of the
-screw's gave 6 false jam declarations and 79 % too little precision loss (the wear follows
-the travel, inputs.py), a position in degrees a load NEES of 979 (docs/estimation.md,
-"Inputs"). The input-health status says so (outputs.py). (A speed in rpm is mostly rejected
-as out of range, which that status says too.)
+the gear ratio, a speed of the screw's the gear ratio; a position or speed of the other sign
+-1. Nothing else checks such a mistake, and the estimator runs on with it: on the sudden-jam
+bag (gear 5:1) a position of the screw's gave 6 false jam declarations and 79 % too little
+precision loss (the wear follows the travel, inputs.py), a position in degrees a load NEES of
+979, a speed of the other sign a load of the other sign (docs/estimation.md, "Inputs"). The
+input-health status says so (outputs.py). (A speed in rpm is mostly rejected as out of range,
+which that status says too; a current of the other sign is not seen here: docs/ros.md.)
 """
 
 from __future__ import annotations
@@ -45,16 +46,17 @@ class PositionPerSpeed:
         """Record a batch of blocks, in order: each one's position change and its speeds'
         travel [rad], and whether it is measured (moving, two samples or more)."""
         usable = measured & (travel_rad != 0.0) & np.isfinite(moved_rad)
-        ratios = np.abs(moved_rad[usable] / travel_rad[usable])
+        ratios = moved_rad[usable] / travel_rad[usable]
         self._history = np.concatenate((self._history, ratios))[-HISTORY_BLOCKS:]
 
 
 def disagreement(ratio: float | None) -> str | None:
     """What is wrong when the position moves more than AGREEMENT times as far as the speed
-    says, or less than 1/AGREEMENT as far (None when it agrees, or is not measured yet)."""
+    says, or less than 1/AGREEMENT as far, or the other way (None when it agrees, or is not
+    measured yet)."""
     if ratio is None or 1.0 / AGREEMENT <= ratio <= AGREEMENT:
         return None
     return (
-        f"the position moves {ratio:.3g} rad per rad the speed says (a unit, or the gear "
-        "ratio, between them?)"
+        f"the position moves {ratio:.3g} rad per rad the speed says (a unit, a sign, or the "
+        "gear ratio between them?)"
     )

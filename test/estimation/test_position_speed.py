@@ -28,7 +28,7 @@ def test_the_median_of_the_last_blocks_once_there_are_enough() -> None:
     ones = np.ones(HISTORY_BLOCKS - 1)
     ratios.add(ones, ones, np.ones(HISTORY_BLOCKS - 1, dtype=np.bool_))
     assert ratios.ratio is None
-    # Unmeasured blocks, no travel and a non-finite change do not count; the sign does not.
+    # Unmeasured blocks, no travel and a non-finite change do not count.
     ratios.add(
         np.array([5.0, 1.0, math.nan, -0.2]),
         np.array([1.0, 0.0, 1.0, -0.1]),
@@ -49,6 +49,7 @@ def test_the_median_of_the_last_blocks_once_there_are_enough() -> None:
         (1.2, False),
         (0.2, False),
         (57.3, False),
+        (-1.0, False),
     ],
 )
 def test_what_disagrees(ratio: float | None, agrees: bool) -> None:
@@ -60,13 +61,20 @@ def test_what_disagrees(ratio: float | None, agrees: bool) -> None:
 
 @pytest.mark.parametrize(
     ("position_factor", "wrap", "expected"),
-    [(1.0, False, 1.0), (1.0, True, 1.0), (0.2, False, 0.2), (180.0 / math.pi, False, 57.3)],
+    [
+        (1.0, False, 1.0),
+        (1.0, True, 1.0),
+        (0.2, False, 0.2),
+        (180.0 / math.pi, False, 57.3),
+        (-1.0, False, -1.0),
+        (-1.0, True, -1.0),
+    ],
 )
 def test_the_estimator_measures_how_far_the_position_moves_per_speed(
     position_factor: float, wrap: bool, expected: float
 ) -> None:
-    """A position of the screw's behind a 5:1 gear, or in degrees, is seen; wrapped into one
-    turn it is not a mistake. The same whatever the chunks."""
+    """A position of the screw's behind a 5:1 gear, in degrees, or counting the other way is
+    seen; wrapped into one turn it is not a mistake. The same whatever the chunks."""
     run = moving_run(4.0, 0.5, seed=2)
     position = run.position_rad * position_factor
     if wrap:
