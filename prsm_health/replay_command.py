@@ -28,6 +28,7 @@ from prsm_health.bags.reader import joint_names
 from prsm_health.bags.topics import MOTOR_FRAME
 from prsm_health.estimation.estimate import UM_PER_M
 from prsm_health.estimation.inputs import RejectReason
+from prsm_health.estimation.metrics import Metrics
 from prsm_health.estimation.params import (
     EstimatorParams,
     bundled_params_file,
@@ -381,6 +382,19 @@ def _measured_in_motion(result: ReplayResult) -> str:
     return "; ".join(parts)
 
 
+def _count_right(metrics: Metrics) -> str:
+    """How often the most likely jam count was the true one, and the largest probability
+    given to a wrong one (its bin's lower edge: Metrics.jam_calibration)."""
+    bins = metrics.jam_calibration
+    estimates = sum(b.estimates for b in bins)
+    if not estimates:
+        return "no count scored"
+    right = sum(b.correct for b in bins)
+    said = f"count right in {100.0 * right / estimates:.2f} % of the estimates"
+    wrong = [b for b in bins if b.correct < b.estimates]
+    return said + (f" (wrong ones at p >= {wrong[-1].low:g})" if wrong else "")
+
+
 def summary(bag: Path, source: str, result: ReplayResult) -> str:
     """A few lines for the operator: what was read, the last estimate, the scores."""
     counters = result.counters
@@ -447,7 +461,8 @@ def summary(bag: Path, source: str, result: ReplayResult) -> str:
             )
         coverage = metrics.precision_loss_coverage_2sigma
         lines.append(
-            f"  jams: {jams}, false declarations {metrics.false_jam_declarations}; {loss}"
+            f"  jams: {jams}, false declarations {metrics.false_jam_declarations}, "
+            f"{_count_right(metrics)}; {loss}"
             + (f", 2-sigma coverage {100 * coverage:.0f} %" if math.isfinite(coverage) else "")
         )
         if metrics.estimates_beyond_truth:

@@ -31,6 +31,7 @@ from prsm_health.bags.typestore import typestore
 from prsm_health.bags.writer import BagWriter, write_joint_states, write_motor_states, write_truth
 from prsm_health.cli import main
 from prsm_health.estimation.estimate import EstimateEvent
+from prsm_health.estimation.metrics import CalibrationBin
 from prsm_health.estimation.params import EstimatorParams
 from prsm_health.outputs import INPUT_HEALTH
 from prsm_health.replay import ReplayResult, replay
@@ -631,7 +632,10 @@ def test_metrics_that_cannot_be_computed_are_null_in_the_json(
     out = capsys.readouterr().out
     assert "vs truth: no load estimate in motion to score" in out
     # Printed as "identified after -" and "precision loss error nan %".
-    assert "jams: none, false declarations 0; no precision loss in the truth to compare" in out
+    assert (
+        "jams: none, false declarations 0, count right in 100.00 % of the estimates; no "
+        "precision loss in the truth to compare"
+    ) in out
 
     def refuse(constant: str) -> None:
         raise ValueError(f"not JSON: {constant}")
@@ -900,6 +904,24 @@ def test_the_summary_says_what_was_not_measured_and_a_position_that_disagrees(
     ) in text
     wrong = replay_command.summary(bag, "x", dataclasses.replace(result, position_per_speed=0.2))
     assert "; WRONG INPUT: the position moves 0.2 rad per rad the speed says (a unit" in wrong
+
+
+def test_the_summary_says_how_often_the_count_was_right(bag: Path) -> None:
+    """From the jam count's calibration bins: the share of estimates whose most likely count
+    was the true one, and the largest probability a wrong one had (its bin's lower edge)."""
+    result = replay(bag, params())
+    assert result.metrics is not None
+    bins = [
+        CalibrationBin(0.5, 0.9, 10, 9, 0.7),
+        CalibrationBin(0.99, 0.999, 20, 15, 0.995),
+        CalibrationBin(0.99999, 1.0, 70, 70, 1.0),
+    ]
+    metrics = dataclasses.replace(result.metrics, jam_calibration=tuple(bins))
+    text = replay_command.summary(bag, "x", dataclasses.replace(result, metrics=metrics))
+    assert ", count right in 94.00 % of the estimates (wrong ones at p >= 0.99); " in text
+    none = dataclasses.replace(result.metrics, jam_calibration=())
+    text = replay_command.summary(bag, "x", dataclasses.replace(result, metrics=none))
+    assert ", no count scored; " in text
 
 
 def test_the_time_label_names_each_clock_jumps_shift_once() -> None:
