@@ -128,6 +128,10 @@ class InputHealth:
     position_per_speed: how far the motor position moves per radian the speed says, measured
     in motion (1 when they agree; :attr:`HealthEstimator.position_per_speed
     <prsm_health.estimation.estimator.HealthEstimator.position_per_speed>`; None: not yet).
+    out_of_range_by_field: samples rejected as out of range by the field beyond its range
+    (:attr:`HealthEstimator.out_of_range_by_field
+    <prsm_health.estimation.estimator.HealthEstimator.out_of_range_by_field>`; empty: not
+    known).
     """
 
     rate_hz: float
@@ -143,6 +147,7 @@ class InputHealth:
     input_clock_s: float | None = None
     speed_noise_std_rad_s: float | None = None
     position_per_speed: float | None = None
+    out_of_range_by_field: Mapping[str, int] = field(default_factory=dict)
 
 
 @dataclass(frozen=True)
@@ -343,7 +348,11 @@ def _inputs(inputs: InputHealth, th: DiagnosticThresholds, now_s: float) -> _Par
         problems.append(wrong)
     fraction = inputs.recent_rejected_fraction
     if fraction > 0.0 and fraction >= th.rejected_warn_fraction:
-        reasons = ", ".join(k for k, v in inputs.recent_rejected.items() if v)
+        reasons = ", ".join(
+            out_of_range_reason(inputs.out_of_range_by_field) if k == "out_of_range" else k
+            for k, v in inputs.recent_rejected.items()
+            if v
+        )
         problems.append(f"{100.0 * fraction:.1f} % rejected in the last second ({reasons})")
     rejected_total = sum(inputs.rejected.values())
     noise, ratio = inputs.speed_noise_std_rad_s, inputs.position_per_speed
@@ -365,7 +374,15 @@ def _inputs(inputs: InputHealth, th: DiagnosticThresholds, now_s: float) -> _Par
         "position_per_speed": -1.0 if ratio is None else ratio,
     }
     values.update({f"rejected_{reason}": count for reason, count in inputs.rejected.items()})
+    values.update({f"out_of_range_{name}": n for name, n in inputs.out_of_range_by_field.items()})
     return (Level.WARN if problems else Level.OK), message, _numbers(values)
+
+
+def out_of_range_reason(by_field: Mapping[str, int]) -> str:
+    """The reason ``out_of_range``, with the fields beyond their range so far, e.g.
+    ``out_of_range: speed`` (a speed in rpm read as rad/s)."""
+    fields = [name for name, count in by_field.items() if count]
+    return "out_of_range" + (f": {', '.join(fields)}" if fields else "")
 
 
 def _recent(at_s: float | None, now_s: float) -> bool:

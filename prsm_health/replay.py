@@ -29,7 +29,7 @@ import time
 from collections import Counter
 from collections.abc import Callable, Iterator
 from contextlib import ExitStack
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from pathlib import Path
 from types import TracebackType
 from typing import Any
@@ -85,7 +85,7 @@ class ReplayResult:
     (the same). elapsed_s: wall time of reading and estimating (without writing ``out`` or
     scoring). speed_noise_std_rad_s: the speed noise the estimator measured in motion, and
     position_per_speed how far the position moves per radian the speed says (None: too little
-    motion).
+    motion). out_of_range_by_field: the samples rejected as out of range, by field.
     """
 
     states: list[HealthState]
@@ -99,6 +99,7 @@ class ReplayResult:
     inputs_complete: bool = True
     speed_noise_std_rad_s: float | None = None
     position_per_speed: float | None = None
+    out_of_range_by_field: dict[str, int] = field(default_factory=dict)
 
 
 def _chunks(bag: Path, topics: InputTopics, damage: list[BagError]) -> Iterator[MotorSamples]:
@@ -189,6 +190,7 @@ def replay(
         inputs_complete=inputs_complete,
         speed_noise_std_rad_s=estimator.speed_noise_std_rad_s,
         position_per_speed=estimator.position_per_speed,
+        out_of_range_by_field=estimator.out_of_range_by_field,
     )
 
 
@@ -320,6 +322,7 @@ class _Output:
         self._diagnostics.inputs.judge(now, counters.accepted, rejected_by_reason(counters, {}))
         self._diagnostics.inputs.speed_noise_std_rad_s = estimator.speed_noise_std_rad_s
         self._diagnostics.inputs.position_per_speed = estimator.position_per_speed
+        self._diagnostics.inputs.out_of_range_by_field = estimator.out_of_range_by_field
         self._diagnostics.events.observe(now, states, counters)
         self._diagnostics.events.non_finite(now, replaced)
         due, written = self._diagnostics_due_s, self._diagnostics_written_s

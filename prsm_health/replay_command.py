@@ -44,7 +44,7 @@ from prsm_health.interrupt import (
     stop_on_interrupt,
 )
 from prsm_health.output_paths import make_folder, remove_made_folders
-from prsm_health.outputs import DEFAULT_HARDWARE_ID, hardware_id_problem
+from prsm_health.outputs import DEFAULT_HARDWARE_ID, hardware_id_problem, out_of_range_reason
 from prsm_health.replay import ReplayResult, replay
 from prsm_health.scenes.recording import (
     SceneActuator,
@@ -350,8 +350,7 @@ def _rejected_why(bag: Path, topics: InputTopics, result: ReplayResult) -> str:
     array too short for it, gives a non-finite sample)."""
     if not result.samples:
         return f"no message on {topics.joint_states or topics.motor_state}"
-    counts = result.counters.rejected
-    why = ", ".join(f"{r.name.lower()} {counts[r]}" for r in RejectReason if counts[r])
+    why = _rejections(result)
     if topics.joint_states is None:
         return f"rejected as {why}"
     names = ", ".join(map(repr, joint_names(bag, topics.joint_states))) or "no joint"
@@ -361,6 +360,18 @@ def _rejected_why(bag: Path, topics: InputTopics, result: ReplayResult) -> str:
         f"or position array too short for it give non-finite samples, and the first message "
         f"names {names}"
     )
+
+
+def _rejections(result: ReplayResult) -> str:
+    """The rejected samples by reason (out of range with the fields beyond their range)."""
+    counts = result.counters.rejected
+    return ", ".join(f"{_reason(r, result)} {counts[r]}" for r in RejectReason if counts[r])
+
+
+def _reason(reason: RejectReason, result: ReplayResult) -> str:
+    if reason == RejectReason.OUT_OF_RANGE:
+        return out_of_range_reason(result.out_of_range_by_field)
+    return reason.name.lower()
 
 
 def _measured_in_motion(result: ReplayResult) -> str:
@@ -402,8 +413,9 @@ def summary(bag: Path, source: str, result: ReplayResult) -> str:
     lines = [
         f"{bag}: {result.samples} samples, {len(result.states)} estimates in "
         f"{result.elapsed_s:.2f} s ({rate:,.0f} samples/s); parameters: {source}",
-        f"  samples accepted {counters.accepted}, rejected {counters.rejected_total} "
-        f"(time resets {counters.time_resets}, gaps {counters.gaps}); "
+        f"  samples accepted {counters.accepted}, rejected {counters.rejected_total}"
+        + (f" ({_rejections(result)})" if counters.rejected_total else "")
+        + f"; time resets {counters.time_resets}, gaps {counters.gaps}; "
         + _measured_in_motion(result),
     ]
     if result.damage is not None:

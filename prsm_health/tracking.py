@@ -46,14 +46,16 @@ class InputTracker:
     this run: totals an estimator brings from a restored state are its starting point
     (:meth:`start_from`), not samples judged now. ``topic``: where the inputs come from (named
     by the input-health status; empty if unknown). ``speed_noise_std_rad_s``: the motor speed's
-    noise the estimator measured in motion, and ``position_per_speed`` how far the position
-    moves per radian the speed says, as the caller last read them (None: not yet).
+    noise the estimator measured in motion, ``position_per_speed`` how far the position
+    moves per radian the speed says (None: not yet), and ``out_of_range_by_field`` the
+    samples rejected as out of range by field, as the caller last read them.
     """
 
     def __init__(self) -> None:
         self.topic = ""
         self.speed_noise_std_rad_s: float | None = None
         self.position_per_speed: float | None = None
+        self.out_of_range_by_field: dict[str, int] = {}
         self._received_total = 0
         self._last_sample_s: float | None = None
         # When the first sample was rejected since one was last accepted (None: none since).
@@ -176,6 +178,7 @@ class InputTracker:
             input_clock_s=self._input_clock_s,
             speed_noise_std_rad_s=self.speed_noise_std_rad_s,
             position_per_speed=self.position_per_speed,
+            out_of_range_by_field=dict(self.out_of_range_by_field),
         )
 
     def _stamp_rate(self) -> float:

@@ -200,6 +200,17 @@ def test_input_health_rate_and_rejections() -> None:
     )[INPUT_HEALTH]
     assert level == Level.WARN
     assert "non_finite" in message
+    # A speed in rpm read as rad/s: out of range, and the field named.
+    level, message, values = statuses(
+        i=inputs(
+            recent_rejected_fraction=0.5,
+            recent_rejected={"out_of_range": 500, "spike": 1},
+            out_of_range_by_field={"stamp": 0, "current": 0, "speed": 30476, "position": 0},
+        )
+    )[INPUT_HEALTH]
+    assert level == Level.WARN
+    assert message.endswith("50.0 % rejected in the last second (out_of_range: speed, spike)")
+    assert values["out_of_range_speed"] == "30476" and values["out_of_range_stamp"] == "0"
 
 
 @pytest.mark.parametrize(

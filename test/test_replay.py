@@ -906,6 +906,21 @@ def test_the_summary_says_what_was_not_measured_and_a_position_that_disagrees(
     assert "; WRONG INPUT: the position moves 0.2 rad per rad the speed says (a unit" in wrong
 
 
+def test_the_summary_names_the_rejections_by_reason_and_field(bag: Path) -> None:
+    """A speed in rpm read as rad/s: half of it beyond three times the largest speed. The
+    summary said only "rejected 30476"."""
+    result = replay(bag, params())
+    counters = dataclasses.replace(result.counters, rejected=[2, 30, 0, 1, 0])
+    rejected = dataclasses.replace(
+        result,
+        counters=counters,
+        out_of_range_by_field={"stamp": 0, "current": 0, "speed": 30, "position": 0},
+    )
+    text = replay_command.summary(bag, "x", rejected)
+    assert ", rejected 33 (non_finite 2, out_of_range: speed 30, spike 1); time resets" in text
+    assert ", rejected 0; time resets 0, gaps 0; " in replay_command.summary(bag, "x", result)
+
+
 def test_the_summary_says_how_often_the_count_was_right(bag: Path) -> None:
     """From the jam count's calibration bins: the share of estimates whose most likely count
     was the true one, and the largest probability a wrong one had (its bin's lower edge)."""

@@ -100,6 +100,14 @@ class HealthEstimator:
         return self._blocker.speed_noise.measured_std_rad_s
 
     @property
+    def out_of_range_by_field(self) -> dict[str, int]:
+        """Samples rejected as out of range since this estimator started, by the field beyond
+        its range (:attr:`SampleBlocker.out_of_range
+        <prsm_health.estimation.inputs.SampleBlocker.out_of_range>`; not saved with the
+        state)."""
+        return dict(self._blocker.out_of_range)
+
+    @property
     def position_per_speed(self) -> float | None:
         """How far the motor position moves per radian of the speeds' travel, measured in
         motion (1 when they agree; :mod:`prsm_health.estimation.position_speed`), None

@@ -74,6 +74,9 @@ LARGEST_STAMP_S = 2.0**31
 #: years at 6000 rpm. Inside it the carrier angle keeps better than 1e-3 rad of precision (the
 #: ripple's phase); 1e308 was accepted and the phase meant nothing.
 LARGEST_POSITION_RAD = 1e12
+#: The fields an out-of-range sample is counted by (SampleBlocker.out_of_range), in the order
+#: of MotorSamples.
+OUT_OF_RANGE_FIELDS = ("stamp", "current", "speed", "position")
 
 
 class RejectReason(enum.IntEnum):
@@ -213,6 +216,10 @@ class SampleBlocker:
         #: The most samples a block holds (MAX_SAMPLE_RATE_HZ).
         self.block_capacity = math.ceil(params.filter.block_duration_s * MAX_SAMPLE_RATE_HZ)
         self.counters = InputCounters()
+        #: Samples rejected as out of range since this blocker started, by the field beyond
+        #: its range (one sample may count for several; not saved with the state): a speed in
+        #: rpm instead of rad/s shows as "speed".
+        self.out_of_range = dict.fromkeys(OUT_OF_RANGE_FIELDS, 0)
         self._last_stamp = -math.inf  # the latest accepted stamp (a held sample's too)
         self._jumped_from = -math.inf  # the stamp the latest accepted one jumped from
         self._held: MotorSamples | None = None  # a last sample that jumped ahead (module doc)
@@ -318,14 +325,18 @@ class SampleBlocker:
         )
         ok = np.asarray(in_range)
         if not ok.all():
-            finite = (
-                np.isfinite(samples.stamp_s)
-                & np.isfinite(samples.current_a)
-                & np.isfinite(samples.speed_rad_s)
-                & np.isfinite(samples.position_rad)
+            columns = (
+                samples.stamp_s,
+                samples.current_a,
+                samples.speed_rad_s,
+                samples.position_rad,
             )
-            self._count(RejectReason.NON_FINITE, np.asarray(~finite))
-            self._count(RejectReason.OUT_OF_RANGE, np.asarray(finite & ~in_range))
+            finite = np.asarray(np.logical_and.reduce([np.isfinite(c) for c in columns]))
+            self._count(RejectReason.NON_FINITE, ~finite)
+            self._count(RejectReason.OUT_OF_RANGE, finite & ~ok)
+            limits = (LARGEST_STAMP_S, self._max_current, self._max_speed, LARGEST_POSITION_RAD)
+            for name, column, limit in zip(OUT_OF_RANGE_FIELDS, columns, limits, strict=True):
+                self.out_of_range[name] += int(np.count_nonzero(finite & (np.abs(column) > limit)))
         return ok
 
     def _advance_time(

@@ -121,6 +121,8 @@ def test_bad_values_are_rejected_and_counted_by_reason() -> None:
     rejected = blocker.counters.rejected
     assert rejected[RejectReason.NON_FINITE] == 2
     assert rejected[RejectReason.OUT_OF_RANGE] == 2
+    # By the field beyond its range (a non-finite sample counts for none).
+    assert blocker.out_of_range == {"stamp": 0, "current": 0, "speed": 1, "position": 1}
     assert rejected[RejectReason.SPIKE] == 1
     assert blocker.counters.accepted + blocker.counters.rejected_total == len(samples)
 
