@@ -33,7 +33,8 @@ def stamp(msg: Any, seconds: float) -> None:
 
 
 def motor_states(samples: MotorSamples) -> list[Any]:
-    """N messages: NaN currents, infinite speeds, invalid stamps, stamps going back."""
+    """N messages: NaN currents, infinite speeds, invalid stamps, stamps going back, speeds
+    out of range (as a speed in rpm read as rad/s would be)."""
     messages = []
     for i in range(N):
         msg = MotorState(
@@ -48,6 +49,8 @@ def motor_states(samples: MotorSamples) -> list[Any]:
             msg.speed_rad_s = math.inf
         elif 310 <= i < 312:
             msg.header.stamp.nanosec = 0xFFFFFFFF  # the bags' marker of a non-finite stamp
+        elif 320 <= i < 323:
+            msg.speed_rad_s = 1e5
         messages.append(msg)
     return messages
 
@@ -78,7 +81,13 @@ def joint_states(samples: MotorSamples) -> list[Any]:
 
 
 EXPECTED = {
-    "malformed_motor": {"rejected_non_finite": "12", "rejected_time_backwards": "5"},
+    "malformed_motor": {
+        "rejected_non_finite": "12",
+        "rejected_time_backwards": "5",
+        "rejected_out_of_range": "3",
+        "out_of_range_speed": "3",
+        "out_of_range_current": "0",
+    },
     "malformed_joint": {
         "rejected_joint_missing": "5",
         "rejected_joint_incomplete": "3",
