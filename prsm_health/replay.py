@@ -320,9 +320,7 @@ class _Output:
         self._receive(now, self._unplaced, spacing_s)
         self._unplaced = 0
         self._diagnostics.inputs.judge(now, counters.accepted, rejected_by_reason(counters, {}))
-        self._diagnostics.inputs.speed_noise_std_rad_s = estimator.speed_noise_std_rad_s
-        self._diagnostics.inputs.position_per_speed = estimator.position_per_speed
-        self._diagnostics.inputs.out_of_range_by_field = estimator.out_of_range_by_field
+        self._diagnostics.inputs.read_measures(estimator)
         self._diagnostics.events.observe(now, states, counters)
         self._diagnostics.events.non_finite(now, replaced)
         due, written = self._diagnostics_due_s, self._diagnostics_written_s

@@ -14,6 +14,7 @@ from collections.abc import Iterable, Mapping
 import numpy as np
 
 from prsm_health.estimation.estimate import EstimateEvent, HealthState
+from prsm_health.estimation.estimator import HealthEstimator
 from prsm_health.estimation.inputs import InputCounters, RejectReason
 from prsm_health.estimation.params import EstimatorParams
 from prsm_health.outputs import (
@@ -48,7 +49,7 @@ class InputTracker:
     by the input-health status; empty if unknown). ``speed_noise_std_rad_s``: the motor speed's
     noise the estimator measured in motion, ``position_per_speed`` how far the position
     moves per radian the speed says (None: not yet), and ``out_of_range_by_field`` the
-    samples rejected as out of range by field, as the caller last read them.
+    samples rejected as out of range by field, as :meth:`read_measures` last read them.
     """
 
     def __init__(self) -> None:
@@ -69,6 +70,13 @@ class InputTracker:
         self._accepted = self._start_accepted = 0
         self._rejected: dict[str, int] = {}
         self._start_rejected: dict[str, int] = {}
+
+    def read_measures(self, estimator: HealthEstimator) -> None:
+        """Take what ``estimator`` has measured of its inputs so far: the speed noise, the
+        position per speed and the out-of-range samples by field."""
+        self.speed_noise_std_rad_s = estimator.speed_noise_std_rad_s
+        self.position_per_speed = estimator.position_per_speed
+        self.out_of_range_by_field = estimator.out_of_range_by_field
 
     def start_from(self, accepted: int, rejected: Mapping[str, int]) -> None:
         """The estimator's totals before this run (restored from a saved state)."""

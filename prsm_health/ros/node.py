@@ -558,9 +558,7 @@ class HealthNode(LifecycleNode):
         self._tracker.inputs.update(
             now, received, counters.accepted, rejected, estimator.input_clock_s
         )
-        self._tracker.inputs.speed_noise_std_rad_s = estimator.speed_noise_std_rad_s
-        self._tracker.inputs.position_per_speed = estimator.position_per_speed
-        self._tracker.inputs.out_of_range_by_field = estimator.out_of_range_by_field
+        self._tracker.inputs.read_measures(estimator)
         self._tracker.events.observe(now, states, counters)
         if states:
             self._latest, self._latest_restored = states[-1], False
