@@ -10,9 +10,10 @@ the gear ratio, a speed of the screw's the gear ratio; a position or speed of th
 -1. Nothing else checks such a mistake, and the estimator runs on with it: on the sudden-jam
 bag (gear 5:1) a position of the screw's gave 6 false jam declarations and 79 % too little
 precision loss (the wear follows the travel, inputs.py), a position in degrees a load NEES of
-979, a speed of the other sign a load of the other sign (docs/estimation.md, "Inputs"). The
-input-health status says so (outputs.py). (A speed in rpm is mostly rejected as out of range,
-which that status says too; a current of the other sign is not seen here: docs/ros.md.)
+979, a speed of the other sign a load of the other sign (docs/estimation.md, "Numerical
+safety", "Position against speed"). The input-health status says so (outputs.py). (A speed
+in rpm is mostly rejected as out of range, which that status says too; a current of the other
+sign is not seen here: docs/ros.md.)
 """
 
 from __future__ import annotations
