@@ -28,6 +28,7 @@ from dataclasses import dataclass, field, replace
 from typing import Any
 
 from prsm_health.estimation.estimate import S_PER_H, UM_PER_M, HealthState
+from prsm_health.estimation.inputs import InputMeasures
 from prsm_health.estimation.params import DiagnosticThresholds
 from prsm_health.estimation.position_speed import disagreement
 
@@ -122,16 +123,9 @@ class InputHealth:
     by which the accepted samples' stamps advance per second of the caller's clock (the median
     over the last second; -1: not known, e.g. in an offline replay, whose clock is the stamps).
     input_clock_s: the latest accepted sample's stamp (None: not known, as in an offline
-    replay). speed_noise_std_rad_s: the motor speed's noise the estimator measured in motion
-    (:attr:`HealthEstimator.speed_noise_std_rad_s
-    <prsm_health.estimation.estimator.HealthEstimator.speed_noise_std_rad_s>`; None: not yet).
-    position_per_speed: how far the motor position moves per radian the speed says, measured
-    in motion (1 when they agree; :attr:`HealthEstimator.position_per_speed
-    <prsm_health.estimation.estimator.HealthEstimator.position_per_speed>`; None: not yet).
-    out_of_range_by_field: samples rejected as out of range by the field beyond its range
-    (:attr:`HealthEstimator.out_of_range_by_field
-    <prsm_health.estimation.estimator.HealthEstimator.out_of_range_by_field>`; empty: not
-    known).
+    replay). measures: what the estimator has measured of its inputs (speed noise, position
+    per speed, out-of-range samples by field; :attr:`HealthEstimator.input_measures
+    <prsm_health.estimation.estimator.HealthEstimator.input_measures>`).
     """
 
     rate_hz: float
@@ -145,9 +139,7 @@ class InputHealth:
     rejecting_since_s: float | None = None
     stamp_rate: float = -1.0
     input_clock_s: float | None = None
-    speed_noise_std_rad_s: float | None = None
-    position_per_speed: float | None = None
-    out_of_range_by_field: Mapping[str, int] = field(default_factory=dict)
+    measures: InputMeasures = field(default_factory=InputMeasures)
 
 
 @dataclass(frozen=True)
@@ -344,18 +336,19 @@ def _inputs(inputs: InputHealth, th: DiagnosticThresholds, now_s: float) -> _Par
             "stamps before 1970 (negative): the estimates go out stamped 0, as a ROS time"
             " cannot be negative (estimate_stamp_s has their own)"
         )
-    if (wrong := disagreement(inputs.position_per_speed)) is not None:
+    measures = inputs.measures
+    noise, ratio = measures.speed_noise_std_rad_s, measures.position_per_speed
+    if (wrong := disagreement(ratio)) is not None:
         problems.append(wrong)
     fraction = inputs.recent_rejected_fraction
     if fraction > 0.0 and fraction >= th.rejected_warn_fraction:
         reasons = ", ".join(
-            out_of_range_reason(inputs.out_of_range_by_field) if k == "out_of_range" else k
+            out_of_range_reason(measures.out_of_range_by_field) if k == "out_of_range" else k
             for k, v in inputs.recent_rejected.items()
             if v
         )
         problems.append(f"{100.0 * fraction:.1f} % rejected in the last second ({reasons})")
     rejected_total = sum(inputs.rejected.values())
-    noise, ratio = inputs.speed_noise_std_rad_s, inputs.position_per_speed
     message = "; ".join(problems) or (
         f"{inputs.rate_hz:.0f} Hz, {rejected_total} rejected of {inputs.received} received"
         + ("" if noise is None else f", speed noise {noise:.2f} rad/s")
@@ -374,7 +367,7 @@ def _inputs(inputs: InputHealth, th: DiagnosticThresholds, now_s: float) -> _Par
         "position_per_speed": -1.0 if ratio is None else ratio,
     }
     values.update({f"rejected_{reason}": count for reason, count in inputs.rejected.items()})
-    values.update({f"out_of_range_{name}": n for name, n in inputs.out_of_range_by_field.items()})
+    values.update({f"out_of_range_{name}": n for name, n in measures.out_of_range_by_field.items()})
     return (Level.WARN if problems else Level.OK), message, _numbers(values)
 
 

@@ -54,7 +54,7 @@ from prsm_health.bags.topics import DIAGNOSTICS_TOPIC, HEALTH_TOPIC, TRUTH_TOPIC
 from prsm_health.bags.typestore import typestore
 from prsm_health.estimation.estimate import HealthState
 from prsm_health.estimation.estimator import HealthEstimator
-from prsm_health.estimation.inputs import InputCounters
+from prsm_health.estimation.inputs import InputCounters, InputMeasures
 from prsm_health.estimation.metrics import Metrics, score
 from prsm_health.estimation.params import EstimatorParams
 from prsm_health.outputs import DEFAULT_HARDWARE_ID, DiagnosticStatusData, health_estimate_fields
@@ -83,9 +83,9 @@ class ReplayResult:
     before it), or None; inputs_complete: every input sample was read all the same (the
     damage is in the truth only). stopped: the replay was stopped before the end of the bag
     (the same). elapsed_s: wall time of reading and estimating (without writing ``out`` or
-    scoring). speed_noise_std_rad_s: the speed noise the estimator measured in motion, and
-    position_per_speed how far the position moves per radian the speed says (None: too little
-    motion). out_of_range_by_field: the samples rejected as out of range, by field.
+    scoring). measures: what the estimator measured of its inputs
+    (:attr:`HealthEstimator.input_measures
+    <prsm_health.estimation.estimator.HealthEstimator.input_measures>`).
     """
 
     states: list[HealthState]
@@ -97,9 +97,7 @@ class ReplayResult:
     stopped: bool
     elapsed_s: float
     inputs_complete: bool = True
-    speed_noise_std_rad_s: float | None = None
-    position_per_speed: float | None = None
-    out_of_range_by_field: dict[str, int] = field(default_factory=dict)
+    measures: InputMeasures = field(default_factory=InputMeasures)
 
 
 def _chunks(bag: Path, topics: InputTopics, damage: list[BagError]) -> Iterator[MotorSamples]:
@@ -188,9 +186,7 @@ def replay(
         stopped=stopped,
         elapsed_s=elapsed,
         inputs_complete=inputs_complete,
-        speed_noise_std_rad_s=estimator.speed_noise_std_rad_s,
-        position_per_speed=estimator.position_per_speed,
-        out_of_range_by_field=estimator.out_of_range_by_field,
+        measures=estimator.input_measures,
     )
 
 
@@ -320,7 +316,7 @@ class _Output:
         self._receive(now, self._unplaced, spacing_s)
         self._unplaced = 0
         self._diagnostics.inputs.judge(now, counters.accepted, rejected_by_reason(counters, {}))
-        self._diagnostics.inputs.read_measures(estimator)
+        self._diagnostics.inputs.measures = estimator.input_measures
         self._diagnostics.events.observe(now, states, counters)
         self._diagnostics.events.non_finite(now, replaced)
         due, written = self._diagnostics_due_s, self._diagnostics_written_s

@@ -370,7 +370,7 @@ def _rejections(result: ReplayResult) -> str:
 
 def _reason(reason: RejectReason, result: ReplayResult) -> str:
     if reason == RejectReason.OUT_OF_RANGE:
-        return out_of_range_reason(result.out_of_range_by_field)
+        return out_of_range_reason(result.measures.out_of_range_by_field)
     return reason.name.lower()
 
 
@@ -378,7 +378,7 @@ def _measured_in_motion(result: ReplayResult) -> str:
     """The speed noise and the position's agreement with the speed, measured in motion, or
     why they are not."""
     few = f"(under {HISTORY_BLOCKS} blocks in motion)"
-    noise, ratio = result.speed_noise_std_rad_s, result.position_per_speed
+    noise, ratio = result.measures.speed_noise_std_rad_s, result.measures.position_per_speed
     parts = [
         f"speed noise not measured {few}"
         if noise is None

@@ -14,8 +14,7 @@ from collections.abc import Iterable, Mapping
 import numpy as np
 
 from prsm_health.estimation.estimate import EstimateEvent, HealthState
-from prsm_health.estimation.estimator import HealthEstimator
-from prsm_health.estimation.inputs import InputCounters, RejectReason
+from prsm_health.estimation.inputs import InputCounters, InputMeasures, RejectReason
 from prsm_health.estimation.params import EstimatorParams
 from prsm_health.outputs import (
     DiagnosticStatusData,
@@ -46,17 +45,15 @@ class InputTracker:
     that stops with it goes stale). Counts are of
     this run: totals an estimator brings from a restored state are its starting point
     (:meth:`start_from`), not samples judged now. ``topic``: where the inputs come from (named
-    by the input-health status; empty if unknown). ``speed_noise_std_rad_s``: the motor speed's
-    noise the estimator measured in motion, ``position_per_speed`` how far the position
-    moves per radian the speed says (None: not yet), and ``out_of_range_by_field`` the
-    samples rejected as out of range by field, as :meth:`read_measures` last read them.
+    by the input-health status; empty if unknown). ``measures``: what the estimator has
+    measured of its inputs, as the caller last read them
+    (:attr:`HealthEstimator.input_measures
+    <prsm_health.estimation.estimator.HealthEstimator.input_measures>`).
     """
 
     def __init__(self) -> None:
         self.topic = ""
-        self.speed_noise_std_rad_s: float | None = None
-        self.position_per_speed: float | None = None
-        self.out_of_range_by_field: dict[str, int] = {}
+        self.measures = InputMeasures()
         self._received_total = 0
         self._last_sample_s: float | None = None
         # When the first sample was rejected since one was last accepted (None: none since).
@@ -70,13 +67,6 @@ class InputTracker:
         self._accepted = self._start_accepted = 0
         self._rejected: dict[str, int] = {}
         self._start_rejected: dict[str, int] = {}
-
-    def read_measures(self, estimator: HealthEstimator) -> None:
-        """Take what ``estimator`` has measured of its inputs so far: the speed noise, the
-        position per speed and the out-of-range samples by field."""
-        self.speed_noise_std_rad_s = estimator.speed_noise_std_rad_s
-        self.position_per_speed = estimator.position_per_speed
-        self.out_of_range_by_field = estimator.out_of_range_by_field
 
     def start_from(self, accepted: int, rejected: Mapping[str, int]) -> None:
         """The estimator's totals before this run (restored from a saved state)."""
@@ -184,9 +174,7 @@ class InputTracker:
             rejecting_since_s=self._rejecting_since_s,
             stamp_rate=self._stamp_rate(),
             input_clock_s=self._input_clock_s,
-            speed_noise_std_rad_s=self.speed_noise_std_rad_s,
-            position_per_speed=self.position_per_speed,
-            out_of_range_by_field=dict(self.out_of_range_by_field),
+            measures=self.measures,
         )
 
     def _stamp_rate(self) -> float:

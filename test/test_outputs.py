@@ -9,6 +9,7 @@ from collections import Counter
 import pytest
 
 from prsm_health.estimation.estimate import EstimateEvent, HealthState
+from prsm_health.estimation.inputs import InputMeasures
 from prsm_health.estimation.params import DiagnosticThresholds
 from prsm_health.outputs import (
     AXIAL_LOAD,
@@ -181,15 +182,21 @@ def test_input_health_rate_and_rejections() -> None:
     assert values["rejected_non_finite"] == "3"
     assert values["received"] == "5003"
     assert values["speed_noise_std_rad_s"] == "-1"  # not measured yet
-    level, message, values = statuses(i=inputs(speed_noise_std_rad_s=1.853))[INPUT_HEALTH]
+    level, message, values = statuses(
+        i=inputs(measures=InputMeasures(speed_noise_std_rad_s=1.853))
+    )[INPUT_HEALTH]
     assert level == Level.OK and message.endswith(" received, speed noise 1.85 rad/s")
     assert values["speed_noise_std_rad_s"] == "1.853"
     assert values["position_per_speed"] == "-1"  # not measured yet
-    level, message, values = statuses(i=inputs(position_per_speed=1.04))[INPUT_HEALTH]
+    level, message, values = statuses(i=inputs(measures=InputMeasures(position_per_speed=1.04)))[
+        INPUT_HEALTH
+    ]
     assert level == Level.OK and message.endswith(" received, position per speed 1.04")
     assert values["position_per_speed"] == "1.04"
     # A position of the screw's behind a 5:1 gear (position_speed.py)
-    level, message, _ = statuses(i=inputs(position_per_speed=0.2))[INPUT_HEALTH]
+    level, message, _ = statuses(i=inputs(measures=InputMeasures(position_per_speed=0.2)))[
+        INPUT_HEALTH
+    ]
     assert level == Level.WARN
     assert message.startswith("the position moves 0.2 rad per rad the speed says (a unit")
     level, message, _ = statuses(i=inputs(rate_hz=20.0))[INPUT_HEALTH]
@@ -205,7 +212,9 @@ def test_input_health_rate_and_rejections() -> None:
         i=inputs(
             recent_rejected_fraction=0.5,
             recent_rejected={"out_of_range": 500, "spike": 1},
-            out_of_range_by_field={"stamp": 0, "current": 0, "speed": 30476, "position": 0},
+            measures=InputMeasures(
+                out_of_range_by_field={"stamp": 0, "current": 0, "speed": 30476, "position": 0}
+            ),
         )
     )[INPUT_HEALTH]
     assert level == Level.WARN

@@ -31,6 +31,7 @@ from prsm_health.bags.typestore import typestore
 from prsm_health.bags.writer import BagWriter, write_joint_states, write_motor_states, write_truth
 from prsm_health.cli import main
 from prsm_health.estimation.estimate import EstimateEvent
+from prsm_health.estimation.inputs import InputMeasures
 from prsm_health.estimation.metrics import CalibrationBin
 from prsm_health.estimation.params import EstimatorParams
 from prsm_health.outputs import INPUT_HEALTH
@@ -98,8 +99,9 @@ def test_replay_estimates_scores_and_writes_what_the_node_publishes(
     assert result.metrics.load_rmse_percent_rated < 2.0
     # The scene's drive differences a 4096-count encoder into the speed: about 0.47 rad/s
     # (docs/performance.md, "The drive's sensors"), measured in motion.
-    assert result.speed_noise_std_rad_s is not None
-    assert 0.4 < result.speed_noise_std_rad_s < 0.55
+    noise = result.measures.speed_noise_std_rad_s
+    assert noise is not None
+    assert 0.4 < noise < 0.55
     store = typestore()
     with Reader(out) as reader:
         counts = {c.topic: c.msgcount for c in reader.connections}
@@ -140,7 +142,7 @@ def test_replay_estimates_scores_and_writes_what_the_node_publishes(
     ][-1]
     values = {kv.key: kv.value for kv in last_inputs.values}
     assert float(values["speed_noise_std_rad_s"]) == pytest.approx(
-        result.speed_noise_std_rad_s, rel=1e-3
+        result.measures.speed_noise_std_rad_s, rel=1e-3
     )
 
 
@@ -896,13 +898,15 @@ def test_the_summary_says_what_was_not_measured_and_a_position_that_disagrees(
     bag: Path,
 ) -> None:
     result = replay(bag, params())
-    unmeasured = dataclasses.replace(result, speed_noise_std_rad_s=None, position_per_speed=None)
+    unmeasured = dataclasses.replace(result, measures=InputMeasures())
     text = replay_command.summary(bag, "x", unmeasured)
     assert (
         "; speed noise not measured (under 64 blocks in motion); position and speed not "
         "compared (under 64 blocks in motion)\n"
     ) in text
-    wrong = replay_command.summary(bag, "x", dataclasses.replace(result, position_per_speed=0.2))
+    wrong = replay_command.summary(
+        bag, "x", dataclasses.replace(result, measures=InputMeasures(position_per_speed=0.2))
+    )
     assert "; WRONG INPUT: the position moves 0.2 rad per rad the speed says (a unit" in wrong
 
 
@@ -914,7 +918,9 @@ def test_the_summary_names_the_rejections_by_reason_and_field(bag: Path) -> None
     rejected = dataclasses.replace(
         result,
         counters=counters,
-        out_of_range_by_field={"stamp": 0, "current": 0, "speed": 30, "position": 0},
+        measures=InputMeasures(
+            out_of_range_by_field={"stamp": 0, "current": 0, "speed": 30, "position": 0}
+        ),
     )
     text = replay_command.summary(bag, "x", rejected)
     assert ", rejected 33 (non_finite 2, out_of_range: speed 30, spike 1); time resets" in text

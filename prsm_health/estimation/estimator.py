@@ -22,7 +22,13 @@ import numpy as np
 from prsm_health.estimation.degradation import DegradationIntegrator
 from prsm_health.estimation.estimate import EstimateEvent, HealthState
 from prsm_health.estimation.hypotheses import JamHypotheses, StepResult
-from prsm_health.estimation.inputs import Block, InputCounters, SampleBlocker, merge_blocks
+from prsm_health.estimation.inputs import (
+    Block,
+    InputCounters,
+    InputMeasures,
+    SampleBlocker,
+    merge_blocks,
+)
 from prsm_health.estimation.measurement import LOAD, TorqueModel
 from prsm_health.estimation.params import MIN_BLOCKS_FOR_DIVERGENCE, EstimatorParams
 from prsm_health.estimation.snapshot import (
@@ -94,25 +100,11 @@ class HealthEstimator:
         return self._blocker.input_clock_s
 
     @property
-    def speed_noise_std_rad_s(self) -> float | None:
-        """The motor speed's noise measured in motion so far (used where larger than
-        ``noise.speed_std_rad_s``; :mod:`prsm_health.estimation.speed_noise`), None before."""
-        return self._blocker.speed_noise.measured_std_rad_s
-
-    @property
-    def out_of_range_by_field(self) -> dict[str, int]:
-        """Samples rejected as out of range since this estimator started, by the field beyond
-        its range (:attr:`SampleBlocker.out_of_range
-        <prsm_health.estimation.inputs.SampleBlocker.out_of_range>`; not saved with the
-        state)."""
-        return dict(self._blocker.out_of_range)
-
-    @property
-    def position_per_speed(self) -> float | None:
-        """How far the motor position moves per radian of the speeds' travel, measured in
-        motion (1 when they agree; :mod:`prsm_health.estimation.position_speed`), None
-        before."""
-        return self._blocker.position_per_speed.ratio
+    def input_measures(self) -> InputMeasures:
+        """What the input stage has measured of the inputs so far: the speed noise in motion
+        (used where larger than ``noise.speed_std_rad_s``), how far the position moves per
+        radian the speed says, the out-of-range samples by field (:class:`InputMeasures`)."""
+        return self._blocker.measures()
 
     @property
     def log_evidence(self) -> float:

@@ -26,7 +26,7 @@ from __future__ import annotations
 
 import enum
 import math
-from collections.abc import Callable
+from collections.abc import Callable, Mapping
 from dataclasses import dataclass, field
 
 import numpy as np
@@ -108,6 +108,24 @@ class InputCounters:
     def rejected_total(self) -> int:
         """All rejected samples."""
         return sum(self.rejected)
+
+
+@dataclass(frozen=True)
+class InputMeasures:
+    """What the input stage has measured of its inputs so far (:meth:`SampleBlocker.measures`).
+
+    speed_noise_std_rad_s: the motor speed's noise in motion
+    (:class:`~prsm_health.estimation.speed_noise.SpeedNoise`; None: not yet).
+    position_per_speed: how far the motor position moves per radian the speed says, in motion
+    (1 when they agree; :mod:`prsm_health.estimation.position_speed`; None: not yet).
+    out_of_range_by_field: the samples rejected as out of range, by the field beyond its range
+    (one sample may count for several; :data:`OUT_OF_RANGE_FIELDS`; empty: not known). Only
+    the speed noise is saved with the state.
+    """
+
+    speed_noise_std_rad_s: float | None = None
+    position_per_speed: float | None = None
+    out_of_range_by_field: Mapping[str, int] = field(default_factory=dict)
 
 
 @dataclass(frozen=True)
@@ -244,6 +262,14 @@ class SampleBlocker:
         self._stuck_run = 0  # length of the identical-current run ending there
         self.speed_noise = SpeedNoise(params.noise.speed_std_rad_s)
         self.position_per_speed = PositionPerSpeed()
+
+    def measures(self) -> InputMeasures:
+        """What has been measured of the inputs so far."""
+        return InputMeasures(
+            speed_noise_std_rad_s=self.speed_noise.measured_std_rad_s,
+            position_per_speed=self.position_per_speed.ratio,
+            out_of_range_by_field=dict(self.out_of_range),
+        )
 
     @property
     def input_clock_s(self) -> float | None:

@@ -558,7 +558,7 @@ class HealthNode(LifecycleNode):
         self._tracker.inputs.update(
             now, received, counters.accepted, rejected, estimator.input_clock_s
         )
-        self._tracker.inputs.read_measures(estimator)
+        self._tracker.inputs.measures = estimator.input_measures
         self._tracker.events.observe(now, states, counters)
         if states:
             self._latest, self._latest_restored = states[-1], False

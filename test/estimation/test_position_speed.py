@@ -85,8 +85,8 @@ def test_the_estimator_measures_how_far_the_position_moves_per_speed(
         estimator = HealthEstimator(PARAMS)
         for start in range(0, len(run), size):
             estimator.process(run[start : start + size])
-        assert estimator.position_per_speed is not None
-        found.append(estimator.position_per_speed)
+        assert estimator.input_measures.position_per_speed is not None
+        found.append(estimator.input_measures.position_per_speed)
     assert found[0] == pytest.approx(expected, rel=2e-3)
     assert found[1] == found[0]
 
@@ -94,9 +94,9 @@ def test_the_estimator_measures_how_far_the_position_moves_per_speed(
 def test_nothing_is_said_before_enough_motion() -> None:
     estimator = HealthEstimator(PARAMS)
     estimator.process(moving_run(1.0, 0.5, seed=2))
-    assert estimator.position_per_speed is None
+    assert estimator.input_measures.position_per_speed is None
     standing = MotorSamples(*(np.zeros(4000) for _ in range(4)))
     standing = dataclasses.replace(standing, stamp_s=np.arange(4000) / 1000.0)
     estimator = HealthEstimator(PARAMS)
     estimator.process(standing)
-    assert estimator.position_per_speed is None
+    assert estimator.input_measures.position_per_speed is None

@@ -67,16 +67,16 @@ def test_the_measured_speed_noise_survives_a_restart() -> None:
     samples.speed_rad_s[:] = 150.0 + rng.normal(0.0, 2.0, len(samples))
     first = HealthEstimator(params())
     first.process(samples)
-    measured = first.speed_noise_std_rad_s
+    measured = first.input_measures.speed_noise_std_rad_s
     assert measured == pytest.approx(2.0, rel=0.1)
     saved = json.loads(json.dumps(first.snapshot()))
     resumed = HealthEstimator(params())
     resumed.restore(saved)
-    assert resumed.speed_noise_std_rad_s == measured
+    assert resumed.input_measures.speed_noise_std_rad_s == measured
     del saved["speed_noise_var_rad2_s2"]
     older = HealthEstimator(params())
     older.restore(saved)
-    assert older.speed_noise_std_rad_s is None
+    assert older.input_measures.speed_noise_std_rad_s is None
 
 
 def test_a_state_of_another_screw_is_refused_as_foreign_unless_damaged() -> None:
