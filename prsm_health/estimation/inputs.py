@@ -228,8 +228,13 @@ class SampleBlocker:
         self._carrier_per_motor_rad = float(
             carrier_speed_rad_s(params.actuator.preset.geometry, 1.0 / drive.gear_ratio)
         )
-        self._max_current = drive.max_current_a
-        self._max_speed = params.max_motor_speed_rad_s
+        #: The largest magnitude of each field of a sample, in OUT_OF_RANGE_FIELDS' order.
+        self._range_limits = (
+            LARGEST_STAMP_S,
+            drive.max_current_a,
+            params.max_motor_speed_rad_s,
+            LARGEST_POSITION_RAD,
+        )
         self._spike_a = SPIKE_SIGMAS * params.noise.current_std_a
         #: The most samples a block holds (MAX_SAMPLE_RATE_HZ).
         self.block_capacity = math.ceil(params.filter.block_duration_s * MAX_SAMPLE_RATE_HZ)
@@ -343,11 +348,12 @@ class SampleBlocker:
         and at a position within LARGEST_POSITION_RAD."""
         # A comparison with NaN or inf is False here (numpy emits no warning for comparisons):
         # one test per column tells whether every sample passes, the reasons only on a failure.
+        stamp_limit, current_limit, speed_limit, position_limit = self._range_limits
         in_range = (
-            (np.abs(samples.stamp_s) <= LARGEST_STAMP_S)
-            & (np.abs(samples.current_a) <= self._max_current)
-            & (np.abs(samples.speed_rad_s) <= self._max_speed)
-            & (np.abs(samples.position_rad) <= LARGEST_POSITION_RAD)
+            (np.abs(samples.stamp_s) <= stamp_limit)
+            & (np.abs(samples.current_a) <= current_limit)
+            & (np.abs(samples.speed_rad_s) <= speed_limit)
+            & (np.abs(samples.position_rad) <= position_limit)
         )
         ok = np.asarray(in_range)
         if not ok.all():
@@ -360,8 +366,8 @@ class SampleBlocker:
             finite = np.asarray(np.logical_and.reduce([np.isfinite(c) for c in columns]))
             self._count(RejectReason.NON_FINITE, ~finite)
             self._count(RejectReason.OUT_OF_RANGE, finite & ~ok)
-            limits = (LARGEST_STAMP_S, self._max_current, self._max_speed, LARGEST_POSITION_RAD)
-            for name, column, limit in zip(OUT_OF_RANGE_FIELDS, columns, limits, strict=True):
+            fields = zip(OUT_OF_RANGE_FIELDS, columns, self._range_limits, strict=True)
+            for name, column, limit in fields:
                 self.out_of_range[name] += int(np.count_nonzero(finite & (np.abs(column) > limit)))
         return ok
 
