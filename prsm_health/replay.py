@@ -316,7 +316,6 @@ class _Output:
         self._receive(now, self._unplaced, spacing_s)
         self._unplaced = 0
         self._diagnostics.inputs.judge(now, counters.accepted, rejected_by_reason(counters, {}))
-        self._diagnostics.inputs.measures = estimator.input_measures
         self._diagnostics.events.observe(now, states, counters)
         self._diagnostics.events.non_finite(now, replaced)
         due, written = self._diagnostics_due_s, self._diagnostics_written_s
@@ -333,6 +332,7 @@ class _Output:
         early = min(0.5 * piece_s, 0.25 * DIAGNOSTICS_PERIOD_S)
         if now >= due - early or (samples is None and written is not None and now > written):
             # Due (once per period of bag time on a fixed grid), or the end.
+            self._diagnostics.inputs.measures = estimator.input_measures
             self._write_diagnostics(now)
             self._diagnostics_written_s = now
             due += DIAGNOSTICS_PERIOD_S * (
