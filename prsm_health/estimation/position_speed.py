@@ -20,7 +20,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from prsm_health.estimation.speed_noise import HISTORY_BLOCKS
+from prsm_health.estimation.recent_median import RecentMedian
 from prsm_health.signals import BoolArray, FloatArray
 
 #: Position and speed agree within this factor either way (a speed sensor's calibration is
@@ -30,25 +30,22 @@ AGREEMENT = 1.1
 
 class PositionPerSpeed:
     """The median of the last HISTORY_BLOCKS blocks' position change per travel of their
-    speeds; stateful across chunks, so the result does not depend on how blocks are batched."""
+    speeds (:class:`~prsm_health.estimation.recent_median.RecentMedian`)."""
 
     def __init__(self) -> None:
-        self._history: FloatArray = np.empty(0)
+        self._ratios = RecentMedian()
 
     @property
     def ratio(self) -> float | None:
         """Position change per radian of the speeds' travel (module docstring), None before
         HISTORY_BLOCKS blocks have been measured."""
-        if len(self._history) < HISTORY_BLOCKS:
-            return None
-        return float(np.median(self._history))
+        return self._ratios.median
 
     def add(self, moved_rad: FloatArray, travel_rad: FloatArray, measured: BoolArray) -> None:
         """Record a batch of blocks, in order: each one's position change and its speeds'
         travel [rad], and whether it is measured (moving, two samples or more)."""
         usable = measured & (travel_rad != 0.0) & np.isfinite(moved_rad)
-        ratios = moved_rad[usable] / travel_rad[usable]
-        self._history = np.concatenate((self._history, ratios))[-HISTORY_BLOCKS:]
+        self._ratios.add(moved_rad[usable] / travel_rad[usable])
 
 
 def disagreement(ratio: float | None) -> str | None:
