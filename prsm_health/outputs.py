@@ -29,6 +29,7 @@ from typing import Any
 
 from prsm_health.estimation.estimate import S_PER_H, UM_PER_M, HealthState
 from prsm_health.estimation.inputs import InputMeasures
+from prsm_health.estimation.motion_torque import against_motion
 from prsm_health.estimation.params import DiagnosticThresholds
 from prsm_health.estimation.position_speed import disagreement
 
@@ -340,6 +341,9 @@ def _inputs(inputs: InputHealth, th: DiagnosticThresholds, now_s: float) -> _Par
     noise, ratio = measures.speed_noise_std_rad_s, measures.position_per_speed
     if (wrong := disagreement(ratio)) is not None:
         problems.append(wrong)
+    forward, reverse = measures.torque_along_motion_nm
+    if (wrong := against_motion(forward, reverse)) is not None:
+        problems.append(wrong)
     fraction = inputs.recent_rejected_fraction
     if fraction > 0.0 and fraction >= th.rejected_warn_fraction:
         reasons = ", ".join(
@@ -366,6 +370,9 @@ def _inputs(inputs: InputHealth, th: DiagnosticThresholds, now_s: float) -> _Par
         "speed_noise_std_rad_s": -1.0 if noise is None else noise,
         "position_per_speed": -1.0 if ratio is None else ratio,
     }
+    for name, torque in (("forward", forward), ("reverse", reverse)):
+        if torque is not None:  # signed: no value can say "not yet"
+            values[f"torque_along_motion_{name}_nm"] = torque
     values.update({f"rejected_{reason}": count for reason, count in inputs.rejected.items()})
     values.update({f"out_of_range_{name}": n for name, n in measures.out_of_range_by_field.items()})
     return (Level.WARN if problems else Level.OK), message, _numbers(values)

@@ -29,6 +29,7 @@ from prsm_health.bags.topics import MOTOR_FRAME
 from prsm_health.estimation.estimate import UM_PER_M
 from prsm_health.estimation.inputs import RejectReason
 from prsm_health.estimation.metrics import Metrics
+from prsm_health.estimation.motion_torque import against_motion
 from prsm_health.estimation.params import (
     EstimatorParams,
     bundled_params_file,
@@ -375,8 +376,8 @@ def _reason(reason: RejectReason, result: ReplayResult) -> str:
 
 
 def _measured_in_motion(result: ReplayResult) -> str:
-    """The speed noise and the position's agreement with the speed, measured in motion, or
-    why they are not."""
+    """The speed noise, the position's agreement with the speed and the motor torque along the
+    motion, measured in motion, or why they are not."""
     few = f"(under {HISTORY_BLOCKS} blocks in motion)"
     noise, ratio = result.measures.speed_noise_std_rad_s, result.measures.position_per_speed
     parts = [
@@ -390,7 +391,19 @@ def _measured_in_motion(result: ReplayResult) -> str:
         parts.append(f"WRONG INPUT: {wrong}")
     else:
         parts.append(f"position per speed {ratio:.3f}")
+    forward, reverse = result.measures.torque_along_motion_nm
+    if (wrong := against_motion(forward, reverse)) is not None:
+        parts.append(f"WRONG INPUT: {wrong}")
+    else:
+        parts.append(
+            f"torque along the motion {_torque(forward)} forward, {_torque(reverse)} reverse"
+        )
     return "; ".join(parts)
+
+
+def _torque(torque_nm: float | None) -> str:
+    """A direction's torque along the motion, or that it is not measured yet."""
+    return "not measured" if torque_nm is None else f"{torque_nm:+.2f} N·m"
 
 
 def _count_right(metrics: Metrics) -> str:

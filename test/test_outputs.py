@@ -199,6 +199,21 @@ def test_input_health_rate_and_rejections() -> None:
     ]
     assert level == Level.WARN
     assert message.startswith("the position moves 0.2 rad per rad the speed says (a unit")
+    assert "torque_along_motion_forward_nm" not in values  # signed: absent until measured
+    # A current of the other sign: the motor brakes the motion both ways (motion_torque.py).
+    level, message, values = statuses(
+        i=inputs(measures=InputMeasures(torque_along_motion_nm=(-5.35, -7.01)))
+    )[INPUT_HEALTH]
+    assert level == Level.WARN
+    assert message.startswith("the motor brakes the motion both ways (-5.35 N·m along it forward")
+    assert values["torque_along_motion_forward_nm"] == "-5.35"
+    assert values["torque_along_motion_reverse_nm"] == "-7.01"
+    # A weight lifted and lowered: braking one way only is no mistake.
+    level, _, values = statuses(
+        i=inputs(measures=InputMeasures(torque_along_motion_nm=(5.35, None)))
+    )[INPUT_HEALTH]
+    assert level == Level.OK and values["torque_along_motion_forward_nm"] == "5.35"
+    assert "torque_along_motion_reverse_nm" not in values
     level, message, _ = statuses(i=inputs(rate_hz=20.0))[INPUT_HEALTH]
     assert level == Level.WARN
     assert "20 Hz" in message

@@ -889,12 +889,13 @@ def test_an_output_that_fails_to_write_still_gets_the_summary_printed(
     assert code == 2 and "--report: cannot write into" in captured.err
     assert "samples accepted 12000" in captured.out
     assert re.search(
-        r"; speed noise 0\.\d\d rad/s in motion; position per speed (0\.99\d|1\.00\d)\n",
+        r"; speed noise 0\.\d\d rad/s in motion; position per speed (0\.99\d|1\.00\d); "
+        r"torque along the motion \+\d\.\d\d N·m forward, \+\d\.\d\d N·m reverse\n",
         captured.out,
     )
 
 
-def test_the_summary_says_what_was_not_measured_and_a_position_that_disagrees(
+def test_the_summary_says_what_was_not_measured_and_inputs_that_disagree(
     bag: Path,
 ) -> None:
     result = replay(bag, params())
@@ -902,12 +903,30 @@ def test_the_summary_says_what_was_not_measured_and_a_position_that_disagrees(
     text = replay_command.summary(bag, "x", unmeasured)
     assert (
         "; speed noise not measured (under 64 blocks in motion); position and speed not "
-        "compared (under 64 blocks in motion)\n"
+        "compared (under 64 blocks in motion); torque along the motion not measured forward, "
+        "not measured reverse\n"
     ) in text
     wrong = replay_command.summary(
         bag, "x", dataclasses.replace(result, measures=InputMeasures(position_per_speed=0.2))
     )
     assert "; WRONG INPUT: the position moves 0.2 rad per rad the speed says (a unit" in wrong
+    # A current of the other sign (motion_torque.py); a load that keeps its direction brakes
+    # one way only.
+    braking = replay_command.summary(
+        bag,
+        "x",
+        dataclasses.replace(result, measures=InputMeasures(torque_along_motion_nm=(-5.0, -7.0))),
+    )
+    assert (
+        "; WRONG INPUT: the motor brakes the motion both ways (-5.00 N·m along it forward, "
+        "-7.00 N·m reverse): a current of the other sign"
+    ) in braking
+    weight = replay_command.summary(
+        bag,
+        "x",
+        dataclasses.replace(result, measures=InputMeasures(torque_along_motion_nm=(2.0, -1.5))),
+    )
+    assert "; torque along the motion +2.00 N·m forward, -1.50 N·m reverse\n" in weight
 
 
 def test_the_summary_names_the_rejections_by_reason_and_field(bag: Path) -> None:

@@ -32,6 +32,7 @@ from dataclasses import dataclass, field
 import numpy as np
 from numpy.typing import NDArray
 
+from prsm_health.estimation.motion_torque import TorqueAlongMotion
 from prsm_health.estimation.params import EstimatorParams
 from prsm_health.estimation.position_speed import PositionPerSpeed
 from prsm_health.estimation.speed_noise import MIN_SAMPLES, SpeedNoise
@@ -118,6 +119,9 @@ class InputMeasures:
     (:class:`~prsm_health.estimation.speed_noise.SpeedNoise`; None: not yet).
     position_per_speed: how far the motor position moves per radian the speed says, in motion
     (1 when they agree; :mod:`prsm_health.estimation.position_speed`; None: not yet).
+    torque_along_motion_nm: the motor torque along the motion in motion, forward and reverse
+    (negative: braking it; both negative, a current of the other sign?
+    :mod:`prsm_health.estimation.motion_torque`; None: not yet).
     out_of_range_by_field: the samples rejected as out of range, by the field beyond its range
     (one sample may count for several; :data:`OUT_OF_RANGE_FIELDS`; empty: not known). Only
     the speed noise is saved with the state.
@@ -125,6 +129,7 @@ class InputMeasures:
 
     speed_noise_std_rad_s: float | None = None
     position_per_speed: float | None = None
+    torque_along_motion_nm: tuple[float | None, float | None] = (None, None)
     out_of_range_by_field: Mapping[str, int] = field(default_factory=dict)
 
 
@@ -267,12 +272,14 @@ class SampleBlocker:
         self._stuck_run = 0  # length of the identical-current run ending there
         self.speed_noise = SpeedNoise(params.noise.speed_std_rad_s)
         self.position_per_speed = PositionPerSpeed()
+        self.torque_along_motion = TorqueAlongMotion()
 
     def measures(self) -> InputMeasures:
         """What has been measured of the inputs so far."""
         return InputMeasures(
             speed_noise_std_rad_s=self.speed_noise.measured_std_rad_s,
             position_per_speed=self.position_per_speed.ratio,
+            torque_along_motion_nm=self.torque_along_motion.medians_nm,
             out_of_range_by_field=dict(self.out_of_range),
         )
 
@@ -602,14 +609,14 @@ class SampleBlocker:
         # Each block's travel by its speeds: the trapezoids between its consecutive samples.
         trapezoids = np.r_[0.5 * (w[1:] + w[:-1]) * np.diff(run.stamp_s), 0.0]
         trapezoids[last] = 0.0  # from a block's last sample to the next block's first
+        compared = (direction != 0) & (counts >= 2)
         self.position_per_speed.add(
-            turning[last] - turning[starts],
-            np.add.reduceat(trapezoids, starts),
-            (direction != 0) & (counts >= 2),
+            turning[last] - turning[starts], np.add.reduceat(trapezoids, starts), compared
         )
         slope_var = np.divide(2.0 * noise_var, span**2, out=np.zeros_like(span), where=measurable)
         stamps = t0 + mean_t
         torque = mean_i * self._torque_constant
+        self.torque_along_motion.add(torque, direction, compared)
         cos_mean, sin_mean = means(np.cos(angle)), means(np.sin(angle))
         new_line = np.add.reduceat(gap_before.astype(np.int64), starts) > 0
         self.counters.gaps += int(np.count_nonzero(new_line))

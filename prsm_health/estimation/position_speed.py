@@ -13,7 +13,7 @@ precision loss (the wear follows the travel, inputs.py), a position in degrees a
 979, a speed of the other sign a load of the other sign (docs/estimation.md, "Numerical
 safety", "Position against speed"). The input-health status says so (outputs.py). (A speed
 in rpm is mostly rejected as out of range, which that status says too; a current of the other
-sign is not seen here: docs/ros.md.)
+sign agrees with position and speed, and motion_torque.py sees it.)
 """
 
 from __future__ import annotations
