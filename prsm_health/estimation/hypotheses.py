@@ -329,8 +329,14 @@ class JamHypotheses:
             kf.x, kf.P = x.copy(), p.copy()
             return kf
         if self._params.fidelity.filter == "ukf":
+            # alpha = 1, kappa = 0: lambda = alpha^2 (n + kappa) - n = 0, so the centre point's
+            # mean weight is 0 and every other's 1/2n, none negative, and the points lie at
+            # sqrt(n) standard deviations. At alpha = 0.5 the centre's mean weight was -3
+            # (covariance weight -0.25): where the points straddle the friction's kink at zero
+            # load, the predicted torque was an extrapolation (a stroke end of two-jam-10: NIS
+            # 38, the load 507 N off, then a false count 3 and 90.9 kN off; docs/performance.md).
             points = MerweScaledSigmaPoints(
-                self._dim, alpha=0.5, beta=2.0, kappa=0.0, sqrt_method=safe_sqrt
+                self._dim, alpha=1.0, beta=2.0, kappa=0.0, sqrt_method=safe_sqrt
             )
             kf = UnscentedKalmanFilter(
                 self._dim, 1, 1.0, hx=None, fx=_transition_apply, points=points

@@ -190,6 +190,38 @@ def test_the_ukf_update_carries_the_process_noise_of_its_prediction() -> None:
     assert abs(ukf_load - ekf_load) < 2.0 * ekf_std
 
 
+def test_the_ukf_update_where_its_points_straddle_the_friction_kink() -> None:
+    """A stroke end of two-jam-10 of the benchmark (two jammed rollers, 34.50 s; the prior of
+    count 2 as the UKF had it, the block as recorded): the load ramps down to zero at 43 kN/s
+    and the prediction carries it past zero, where the friction's slope changes (a resisting
+    load 0.22 N·m/kN, an assisting one 0.04). With the sigma points' alpha at 0.5 the centre
+    point's mean weight was -3: the predicted torque an extrapolation, NIS 38, the load
+    updated to -915 +- 148 N against the simulator's -408 N, and the run went on to a false
+    count 3. With non-negative weights (alpha 1) the update lands within 2 sigma of it."""
+    x = np.array([-1266.729, 42950.82, -195263.2, -0.2005969, -0.07480096])
+    p = np.array(
+        [
+            [3361.232, -58928.97, -411098.5, 3.161982, 1.227740],
+            [-58928.97, 1.418191e7, 3.794030e8, -159.6751, -64.69806],
+            [-411098.5, 3.794030e8, 1.981766e10, -1897.808, -388.0133],
+            [3.161982, -159.6751, -1897.808, 4.905e-3, 1.715789e-3],
+            [1.227740, -64.69806, -388.0133, 1.715789e-3, 1.310102e-3],
+        ]
+    )
+    block = Block(
+        34.4995, 0.04, 40, 0.13095, -50.2357, 851.52, 0.99236, 0.11564, direction=-1,
+        current_residual_var_a2=0.0025, motor_acceleration_var_rad2_s4=280.7,
+    )  # fmt: skip
+    settings = EstimatorParams(actuator=Actuator(preset=PRESET), fidelity=Fidelity(filter="ukf"))
+    bank = JamHypotheses(settings, TorqueModel(settings))
+    axis = np.array([-0.933233, -0.359271])
+    bank.hypotheses = [Hypothesis(2, bank._new_filter(x, p), 0.0, ripple_axis=axis)]
+    step = bank.step(block, jerk_psd=5e11)
+    jammed = next(h.filter for h in bank.hypotheses if h.count == 2 and not h.fresh)
+    assert step.nis[0] < 16.0
+    assert abs(float(jammed.x[LOAD]) - -408.0) < 2.0 * math.sqrt(float(jammed.P[LOAD, LOAD]))
+
+
 @pytest.mark.parametrize("prune", [True, False])
 def test_a_maintenance_reset_makes_a_count_certain_and_keeps_the_load(prune: bool) -> None:
     """reset_count: the given count for certain (with pruning off every count stays, at zero
