@@ -12,7 +12,8 @@ negative is a load that pushes whichever way the screw moves, or, far more often
 of the other sign than the drive's convention (docs/ros.md). The estimator would run on with
 it as an assisting load larger than the true one: on the sudden-jam bag a load RMSE of 150 %,
 3 false jam declarations and a load NEES of 18,147 (docs/estimation.md, "Numerical safety",
-"Position against speed"). The input-health status says so (outputs.py).
+"Position against speed"; this check: "Current against the motion"). The input-health status
+says so (outputs.py).
 """
 
 from __future__ import annotations
