@@ -19,6 +19,7 @@ from sensor_msgs.msg import JointState
 from prsm_health.actuator import DriveTrain
 from prsm_health.outputs import INPUT_HEALTH, STATUS_NAMES
 from prsm_health.signals import MotorSamples
+from test.estimation.test_motion_torque import there_and_back
 from test.ros.data import LOAD_N, synthetic_run
 from test.ros.harness import Listener, NodeProcess, stop_process
 
@@ -225,3 +226,50 @@ def test_reliable_input_keeps_every_sample_of_a_burst(ros: None, tmp_path: Path)
             assert node.alive(), node.log()
     finally:
         listener.close()
+
+
+@pytest.mark.timeout(90)
+def test_a_current_of_the_other_sign_is_said_in_input_health(ros: None, tmp_path: Path) -> None:
+    """4 s forward and 4 s back with the current's sign the other way round: the motor brakes
+    the motion both ways, which no other check sees (it agrees with position and speed).
+    Input health warns through DDS and carries the torque along the motion each way."""
+    samples = there_and_back(-5.0, 5.0)
+    count = len(samples)
+    listener = Listener()
+    reliable = QoSProfile(depth=count, reliability=QoSReliabilityPolicy.RELIABLE)
+    publisher = listener.node.create_publisher(MotorState, "/flipped/motor", reliable)
+    try:
+        with NodeProcess(
+            tmp_path,
+            "flipped",
+            hardware_id="flipped",
+            input_topic="/flipped/motor",
+            input_qos="reliable",
+            state_file=str(tmp_path / "flipped.json"),
+            diagnostics_rate_hz=10.0,
+        ) as node:
+            listener.wait_for(lambda: publisher.get_subscription_count() > 0, 20.0, "the node")
+            for i in range(count):
+                msg = MotorState(
+                    current_a=float(samples.current_a[i]),
+                    speed_rad_s=float(samples.speed_rad_s[i]),
+                    position_rad=float(samples.position_rad[i]),
+                )
+                stamp(msg, float(samples.stamp_s[i]))
+                publisher.publish(msg)
+
+            def said() -> dict[str, Any] | None:
+                status = listener.statuses("flipped").get(INPUT_HEALTH)
+                received = status is not None and status["values"]["received"] == str(count)
+                return status if received else None
+
+            listener.wait_for(lambda: said() is not None, 30.0, f"{count} samples received")
+            assert node.alive(), node.log()
+    finally:
+        listener.close()
+    status = said()
+    assert status is not None and status["level"] == "WARN"
+    assert status["message"].startswith("the motor brakes the motion both ways (-3.00 N·m")
+    torque = -5.0 * K_T
+    assert float(status["values"]["torque_along_motion_forward_nm"]) == pytest.approx(torque, 0.01)
+    assert float(status["values"]["torque_along_motion_reverse_nm"]) == pytest.approx(torque, 0.01)
