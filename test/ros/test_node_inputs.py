@@ -1,4 +1,5 @@
 """Malformed inputs never crash the node nor reach its outputs as NaN; they are counted.
+A current of the other sign than the convention is said in input health.
 
 Two nodes in their own processes, one on MotorState and one on JointState (effort = motor
 torque), fed by publishers in the test process (reliable, so that every message arrives).
