@@ -189,64 +189,22 @@ def test_malformed_inputs_are_counted_not_published(ros: None, tmp_path: Path) -
     assert max(len(line) for line in joint_log.splitlines()) < 1000
 
 
-@pytest.mark.timeout(90)
-def test_reliable_input_keeps_every_sample_of_a_burst(ros: None, tmp_path: Path) -> None:
-    """20,000 messages published at once into a node with input_qos reliable and the default
-    queue depth (1000): every one is received (KEEP_ALL holds the publisher back; with
-    KEEP_LAST the queue overwrote samples DDS had acknowledged: 1472 of 20,000 arrived)."""
-    count = 20 * N
-    samples = synthetic_run(count / 1000.0, from_rest=False, seed=4)
-    listener = Listener()
-    reliable = QoSProfile(depth=count, reliability=QoSReliabilityPolicy.RELIABLE)
-    publisher = listener.node.create_publisher(MotorState, "/burst/motor", reliable)
-    try:
-        with NodeProcess(
-            tmp_path,
-            "burst",
-            hardware_id="burst",
-            input_topic="/burst/motor",
-            input_qos="reliable",
-            state_file=str(tmp_path / "burst.json"),
-            diagnostics_rate_hz=10.0,
-        ) as node:
-            listener.wait_for(lambda: publisher.get_subscription_count() > 0, 20.0, "the node")
-            for i in range(count):
-                msg = MotorState(
-                    current_a=float(samples.current_a[i]),
-                    speed_rad_s=float(samples.speed_rad_s[i]),
-                    position_rad=float(samples.position_rad[i]),
-                )
-                stamp(msg, float(samples.stamp_s[i]))
-                publisher.publish(msg)
-
-            def received() -> int:
-                status = listener.statuses("burst").get(INPUT_HEALTH)
-                return int(status["values"]["received"]) if status else 0
-
-            listener.wait_for(lambda: received() == count, 30.0, f"{count} samples received")
-            assert node.alive(), node.log()
-    finally:
-        listener.close()
-
-
-@pytest.mark.timeout(90)
-def test_a_current_of_the_other_sign_is_said_in_input_health(ros: None, tmp_path: Path) -> None:
-    """4 s forward and 4 s back with the current's sign the other way round: the motor brakes
-    the motion both ways, which no other check sees (it agrees with position and speed).
-    Input health warns through DDS and carries the torque along the motion each way."""
-    samples = there_and_back(-5.0, 5.0)
+def input_health_after_burst(tmp_path: Path, name: str, samples: MotorSamples) -> dict[str, Any]:
+    """Publish every sample at once (reliable, MotorState) into a node of its own named
+    ``name`` (input_qos reliable, the default queue depth); return its input-health status
+    once it reports them all received."""
     count = len(samples)
     listener = Listener()
     reliable = QoSProfile(depth=count, reliability=QoSReliabilityPolicy.RELIABLE)
-    publisher = listener.node.create_publisher(MotorState, "/flipped/motor", reliable)
+    publisher = listener.node.create_publisher(MotorState, f"/{name}/motor", reliable)
     try:
         with NodeProcess(
             tmp_path,
-            "flipped",
-            hardware_id="flipped",
-            input_topic="/flipped/motor",
+            name,
+            hardware_id=name,
+            input_topic=f"/{name}/motor",
             input_qos="reliable",
-            state_file=str(tmp_path / "flipped.json"),
+            state_file=str(tmp_path / f"{name}.json"),
             diagnostics_rate_hz=10.0,
         ) as node:
             listener.wait_for(lambda: publisher.get_subscription_count() > 0, 20.0, "the node")
@@ -260,16 +218,37 @@ def test_a_current_of_the_other_sign_is_said_in_input_health(ros: None, tmp_path
                 publisher.publish(msg)
 
             def said() -> dict[str, Any] | None:
-                status = listener.statuses("flipped").get(INPUT_HEALTH)
+                status = listener.statuses(name).get(INPUT_HEALTH)
                 received = status is not None and status["values"]["received"] == str(count)
                 return status if received else None
 
             listener.wait_for(lambda: said() is not None, 30.0, f"{count} samples received")
             assert node.alive(), node.log()
+            status = said()
+            assert status is not None
+            return status
     finally:
         listener.close()
-    status = said()
-    assert status is not None and status["level"] == "WARN"
+
+
+@pytest.mark.timeout(90)
+def test_reliable_input_keeps_every_sample_of_a_burst(ros: None, tmp_path: Path) -> None:
+    """20,000 messages published at once into a node with input_qos reliable and the default
+    queue depth (1000): every one is received (KEEP_ALL holds the publisher back; with
+    KEEP_LAST the queue overwrote samples DDS had acknowledged: 1472 of 20,000 arrived)."""
+    count = 20 * N
+    samples = synthetic_run(count / 1000.0, from_rest=False, seed=4)
+    status = input_health_after_burst(tmp_path, "burst", samples)
+    assert status["values"]["received"] == str(count)
+
+
+@pytest.mark.timeout(90)
+def test_a_current_of_the_other_sign_is_said_in_input_health(ros: None, tmp_path: Path) -> None:
+    """4 s forward and 4 s back with the current's sign the other way round: the motor brakes
+    the motion both ways, which no other check sees (it agrees with position and speed).
+    Input health warns through DDS and carries the torque along the motion each way."""
+    status = input_health_after_burst(tmp_path, "flipped", there_and_back(-5.0, 5.0))
+    assert status["level"] == "WARN"
     assert status["message"].startswith("the motor brakes the motion both ways (-3.00 N·m")
     torque = -5.0 * K_T
     assert float(status["values"]["torque_along_motion_forward_nm"]) == pytest.approx(torque, 0.01)
