@@ -6,7 +6,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from prsm_health.estimation.speed_noise import HISTORY_BLOCKS
+from prsm_health.estimation.speed_noise import HISTORY_BLOCKS, history_median
 from prsm_health.signals import FloatArray
 
 
@@ -22,7 +22,7 @@ class RecentMedian:
         """The median of the last HISTORY_BLOCKS values, None before that many."""
         if len(self._values) < HISTORY_BLOCKS:
             return None
-        return float(np.median(self._values))
+        return float(history_median(self._values))
 
     def add(self, values: FloatArray) -> None:
         """Record a batch of values, oldest first."""

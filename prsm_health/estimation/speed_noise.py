@@ -33,7 +33,7 @@ WINDOW = np.arange(-HISTORY_BLOCKS, 0)
 MIDDLE = (HISTORY_BLOCKS // 2 - 1, HISTORY_BLOCKS // 2)
 
 
-def _median(windows: FloatArray) -> FloatArray:
+def history_median(windows: FloatArray) -> FloatArray:
     """The median of each row of HISTORY_BLOCKS values (np.median's, by a partial sort: under
     half its cost, once per block in the node)."""
     return np.asarray(
@@ -55,7 +55,7 @@ class SpeedNoise:
         """The measured noise (median of the last HISTORY_BLOCKS blocks), None before then."""
         if len(self._history) < HISTORY_BLOCKS:
             return None
-        return float(np.sqrt(_median(self._history)))
+        return float(np.sqrt(history_median(self._history)))
 
     def saved(self) -> list[float]:
         """The measured blocks' variances [rad^2/s^2], oldest first (at most HISTORY_BLOCKS)."""
@@ -75,6 +75,6 @@ class SpeedNoise:
         known = ends >= HISTORY_BLOCKS
         if known.any():
             windows = history[ends[known, None] + WINDOW]
-            result[known] = np.maximum(self._floor_var, _median(windows))
+            result[known] = np.maximum(self._floor_var, history_median(windows))
         self._history = history[-HISTORY_BLOCKS:]
         return result
