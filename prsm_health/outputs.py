@@ -124,8 +124,8 @@ class InputHealth:
     by which the accepted samples' stamps advance per second of the caller's clock (the median
     over the last second; -1: not known, e.g. in an offline replay, whose clock is the stamps).
     input_clock_s: the latest accepted sample's stamp (None: not known, as in an offline
-    replay). measures: what the estimator has measured of its inputs (speed noise, position
-    per speed, out-of-range samples by field; :attr:`HealthEstimator.input_measures
+    replay). measures: what the estimator has measured of its inputs
+    (:attr:`HealthEstimator.input_measures
     <prsm_health.estimation.estimator.HealthEstimator.input_measures>`).
     """
 

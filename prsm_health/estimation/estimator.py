@@ -101,9 +101,8 @@ class HealthEstimator:
 
     @property
     def input_measures(self) -> InputMeasures:
-        """What the input stage has measured of the inputs so far: the speed noise in motion
-        (used where larger than ``noise.speed_std_rad_s``), how far the position moves per
-        radian the speed says, the out-of-range samples by field (:class:`InputMeasures`)."""
+        """What the input stage has measured of the inputs so far (:class:`InputMeasures`; its
+        speed noise is used where larger than ``noise.speed_std_rad_s``)."""
         return self._blocker.measures()
 
     @property
