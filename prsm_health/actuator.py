@@ -25,14 +25,14 @@ import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
 from prsm_health.config import build_dataclass, build_each
-from prsm_health.physics.errors import DomainError, ParameterError
+from prsm_health.physics.errors import ParameterError
 from prsm_health.physics.geometry import (
     Misalignment,
     require_ranges,
     require_real,
 )
 from prsm_health.physics.load_distribution import LoadingCase
-from prsm_health.physics.meshing import meshing
+from prsm_health.physics.meshing import smallest_misaligned_clearance
 from prsm_health.physics.presets import PRESET_NAMES, Preset, load_preset
 
 FloatArray = NDArray[np.float64]
@@ -192,31 +192,26 @@ def _misalignment(tilt: object) -> Misalignment:
         raise ParameterError(name, f"{tilt!r} arc minutes: {exc}") from exc
 
 
-#: Carrier angles per roller spacing at which a misalignment's clearances are checked (the
-#: clearances are periodic in it and smooth: first-order in the tilt, 004 eq. 2-4).
-MISALIGNMENT_CHECK_ANGLES = 64
-
-
 def _check_flanks_stay_apart(preset: Preset, misalignment: Misalignment) -> None:
     """Refuse a misalignment that closes a screw-roller clearance at some carrier angle
-    (:func:`~prsm_health.physics.meshing.meshing`): accepted, it raised a DomainError when
-    the estimator or the simulator was built, not as a bad parameter (found by a review
-    session; from 3 arc minutes on meng2022-misalignment and meng2021-fractal)."""
+    (:func:`~prsm_health.physics.meshing.smallest_misaligned_clearance`, exact over every
+    angle): accepted, it raised a DomainError when the estimator or the simulator was built,
+    not as a bad parameter (found by a review session; from 3 arc minutes on
+    meng2022-misalignment and meng2021-fractal)."""
     if misalignment.is_aligned:
         return
-    spacing = 2.0 * math.pi / preset.geometry.n_rollers
-    for angle in np.linspace(0.0, spacing, MISALIGNMENT_CHECK_ANGLES, endpoint=False):
-        try:
-            meshing(preset.geometry, misalignment, carrier_angle_rad=float(angle))
-        except DomainError as exc:
-            tilt = [
-                round(math.degrees(t) * 60.0, 6)
-                for t in (misalignment.tilt_x_rad, misalignment.tilt_y_rad)
-            ]
-            raise ParameterError(
-                "actuator.misalignment_arcmin",
-                f"{tilt} arc minutes is more than {preset.name}'s clearances allow: {exc}",
-            ) from exc
+    clearance_m, thread, angle_rad = smallest_misaligned_clearance(preset.geometry, misalignment)
+    if clearance_m < 0.0:
+        tilt = [
+            round(math.degrees(t) * 60.0, 6)
+            for t in (misalignment.tilt_x_rad, misalignment.tilt_y_rad)
+        ]
+        raise ParameterError(
+            "actuator.misalignment_arcmin",
+            f"{tilt} arc minutes is more than {preset.name}'s clearances allow: it closes the "
+            f"screw-roller clearance of thread {thread + 1} to {clearance_m * 1e6:.3f} um where "
+            f"a roller passes {math.degrees(angle_rad):.1f} deg; the flanks would overlap",
+        )
 
 
 def actuator_from_mapping(data: object) -> Actuator:

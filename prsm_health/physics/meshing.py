@@ -282,6 +282,45 @@ def _read_only(array: FloatArray) -> FloatArray:
     return array
 
 
+def _clearance_loss_phasor_m(
+    geometry: Geometry, misalignment: Misalignment
+) -> tuple[FloatArray, FloatArray]:
+    """The screw-roller clearance a misalignment takes from thread j of a roller at angle tau,
+    a_j cos(tau) + b_j sin(tau): returns (a_j, b_j) [m], one per thread (004 eq. 2-4, first
+    order). The screw's flank height moves by u_z - grad(z_s) . u_xy at the contact point,
+    and every term of it turns with the roller's angle tau while the threads' heights above
+    the pivot set the tilt's lever.
+    """
+    contact = _aligned_contact(geometry)
+    x, y = contact.x_m, contact.y_m
+    slope_x, slope_y = contact.screw_slope
+    tilt_x, tilt_y = misalignment.tilt_x_rad, misalignment.tilt_y_rad
+    height = contact.height_m + geometry.pitch_m * np.arange(geometry.n_threads)
+    move_x = tilt_y * height + misalignment.offset_x_m
+    move_y = -tilt_x * height + misalignment.offset_y_m
+    along_cos = tilt_x * y - tilt_y * x - slope_x * move_x - slope_y * move_y
+    along_sin = tilt_x * x + tilt_y * y - slope_x * move_y + slope_y * move_x
+    return along_cos, along_sin
+
+
+def smallest_misaligned_clearance(
+    geometry: Geometry, misalignment: Misalignment
+) -> tuple[float, int, float]:
+    """The smallest screw-roller clearance [m] a misalignment leaves at any carrier angle,
+    with its thread (0-based) and the roller angle tau [rad] where it is reached.
+
+    Exact, not sampled: thread j's clearance is c - (a_j cos tau + b_j sin tau)
+    (:func:`_clearance_loss_phasor_m`), whose minimum over tau is c - hypot(a_j, b_j) at
+    tau = atan2(b_j, a_j). Every roller passes every angle as the carrier turns.
+    """
+    along_cos, along_sin = _clearance_loss_phasor_m(geometry, misalignment)
+    loss = np.hypot(along_cos, along_sin)
+    thread = int(np.argmax(loss))
+    clearance = _aligned_contact(geometry).screw_roller_clearance_m - float(loss[thread])
+    angle = math.atan2(float(along_sin[thread]), float(along_cos[thread])) % (2.0 * math.pi)
+    return clearance, thread, angle
+
+
 @lru_cache(maxsize=1024)
 def meshing(
     geometry: Geometry, misalignment: Misalignment, *, carrier_angle_rad: float = 0.0
@@ -291,9 +330,10 @@ def meshing(
     The aligned contact is found once per geometry by minimising the axial flank gap; the
     screw misalignment (004 eq. 2-4: tilt about x and y through the thread-1 pivot, radial
     offset) then changes the clearance of roller i, thread j by the first-order change of the
-    screw flank height at that thread's contact point. ``carrier_angle_rad`` turns the roller
-    set (tau_i = carrier angle + 2 pi (i - 1) / N), which makes the misaligned clearances
-    periodic in time (and with them the contact forces of 004 Fig. 12).
+    screw flank height at that thread's contact point (:func:`_clearance_loss_phasor_m`).
+    ``carrier_angle_rad`` turns the roller set (tau_i = carrier angle + 2 pi (i - 1) / N),
+    which makes the misaligned clearances periodic in time (and with them the contact forces
+    of 004 Fig. 12).
 
     Raises DomainError (naming roller and thread, 1-based) when the misalignment closes a
     screw-roller clearance below zero, i.e. the flanks would overlap.
@@ -305,17 +345,10 @@ def meshing(
     clearance = np.full(shape, contact.screw_roller_clearance_m)
     if not misalignment.is_aligned:
         tau = carrier_angle_rad + 2.0 * math.pi * np.arange(geometry.n_rollers) / geometry.n_rollers
-        cos_tau, sin_tau = np.cos(tau)[:, None], np.sin(tau)[:, None]
-        point_x = cos_tau * contact.x_m - sin_tau * contact.y_m
-        point_y = sin_tau * contact.x_m + cos_tau * contact.y_m
-        slope_x = cos_tau * contact.screw_slope[0] - sin_tau * contact.screw_slope[1]
-        slope_y = sin_tau * contact.screw_slope[0] + cos_tau * contact.screw_slope[1]
-        height = contact.height_m + geometry.pitch_m * np.arange(geometry.n_threads)[None, :]
-        tilt_x, tilt_y = misalignment.tilt_x_rad, misalignment.tilt_y_rad
-        move_x = tilt_y * height + misalignment.offset_x_m
-        move_y = -tilt_x * height + misalignment.offset_y_m
-        move_z = tilt_x * point_y - tilt_y * point_x
-        clearance = clearance - (move_z - slope_x * move_x - slope_y * move_y)
+        along_cos, along_sin = _clearance_loss_phasor_m(geometry, misalignment)
+        clearance = clearance - (
+            np.cos(tau)[:, None] * along_cos[None, :] + np.sin(tau)[:, None] * along_sin[None, :]
+        )
         if (clearance < 0.0).any():
             roller, thread = np.unravel_index(int(np.argmin(clearance)), shape)
             raise DomainError(

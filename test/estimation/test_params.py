@@ -14,6 +14,9 @@ from prsm_health.actuator import DRIVE_TRAIN_RANGES, WEAR_ACCELERATION_RANGE
 from prsm_health.estimation.estimator import HealthEstimator
 from prsm_health.estimation.params import load_params, params_from_mapping
 from prsm_health.physics.errors import ParameterError
+from prsm_health.physics.geometry import Misalignment
+from prsm_health.physics.meshing import meshing, smallest_misaligned_clearance
+from prsm_health.physics.presets import load_preset
 from prsm_health.signals import MotorSamples
 
 
@@ -248,6 +251,37 @@ def test_a_misalignment_that_closes_the_flanks_is_a_bad_parameter() -> None:
         params_from_mapping({"actuator": tilted})
     tilted["misalignment_arcmin"] = [1.0, 0.0]
     HealthEstimator(params_from_mapping({"actuator": tilted}))
+
+
+def test_a_misalignment_just_past_the_clearance_is_refused_at_any_carrier_angle() -> None:
+    """The check sampled 64 carrier angles per roller spacing, so a tilt up to about 1e-5 of
+    itself past the limit passed where the worst angle fell between two samples, and then
+    closed the flanks (a DomainError) where the simulator's carrier reached that angle. Here
+    the tilt's direction puts the worst angle half a sample step from the old grid; a
+    millionth past the limit is refused, a millionth short is accepted and meshes at its
+    worst angle."""
+    preset = load_preset("meng2022-misalignment")
+    geometry = preset.geometry
+    one_arcmin = Misalignment.from_arcmin(1.0, 0.0)
+    aligned, _, _ = smallest_misaligned_clearance(geometry, Misalignment())
+    tilted, _, worst_angle = smallest_misaligned_clearance(geometry, one_arcmin)
+    limit_arcmin = aligned / (aligned - tilted)  # the clearance falls linearly with the tilt
+    half_step = math.pi / geometry.n_rollers / 64
+    direction = half_step - worst_angle % (2.0 * half_step)  # turns the worst angle with it
+    for scale, refused in ((1.0 + 1e-6, True), (1.0 - 1e-6, False)):
+        tilt = limit_arcmin * scale * np.array([math.cos(direction), math.sin(direction)])
+        document = {
+            "actuator": {"preset": preset.name, "misalignment_arcmin": [float(t) for t in tilt]}
+        }
+        if refused:
+            with pytest.raises(ParameterError, match=r"thread \d+ to -0\.000 um .* would overlap"):
+                params_from_mapping(document)
+            continue
+        params = params_from_mapping(document)
+        clearance, _, angle = smallest_misaligned_clearance(geometry, params.actuator.misalignment)
+        assert angle % (2.0 * half_step) == pytest.approx(half_step, abs=1e-6)
+        assert 0.0 <= clearance < 1e-10
+        meshing(geometry, params.actuator.misalignment, carrier_angle_rad=angle)
 
 
 @pytest.mark.parametrize(
