@@ -381,9 +381,7 @@ def _measured_in_motion(result: ReplayResult) -> str:
     few = f"(under {HISTORY_BLOCKS} blocks in motion)"
     noise, ratio = result.measures.speed_noise_std_rad_s, result.measures.position_per_speed
     parts = [
-        f"speed noise not measured {few}"
-        if noise is None
-        else f"speed noise {noise:.2f} rad/s in motion"
+        f"speed noise not measured {few}" if noise is None else f"speed noise {noise:.2f} rad/s"
     ]
     if ratio is None:
         parts.append(f"position and speed not compared {few}")
@@ -428,8 +426,8 @@ def summary(bag: Path, source: str, result: ReplayResult) -> str:
         f"{result.elapsed_s:.2f} s ({rate:,.0f} samples/s); parameters: {source}",
         f"  samples accepted {counters.accepted}, rejected {counters.rejected_total}"
         + (f" ({_rejections(result)})" if counters.rejected_total else "")
-        + f"; time resets {counters.time_resets}, gaps {counters.gaps}; "
-        + _measured_in_motion(result),
+        + f"; time resets {counters.time_resets}, gaps {counters.gaps}",
+        f"  inputs in motion: {_measured_in_motion(result)}",
     ]
     if result.damage is not None:
         covered = "estimates cover" if result.states else "no estimate from"

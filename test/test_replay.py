@@ -889,7 +889,8 @@ def test_an_output_that_fails_to_write_still_gets_the_summary_printed(
     assert code == 2 and "--report: cannot write into" in captured.err
     assert "samples accepted 12000" in captured.out
     assert re.search(
-        r"; speed noise 0\.\d\d rad/s in motion; position per speed (0\.99\d|1\.00\d); "
+        r"gaps 0\n  inputs in motion: speed noise 0\.\d\d rad/s; "
+        r"position per speed (0\.99\d|1\.00\d); "
         r"torque along the motion \+\d\.\d\d N·m forward, \+\d\.\d\d N·m reverse\n",
         captured.out,
     )
@@ -902,9 +903,9 @@ def test_the_summary_says_what_was_not_measured_and_inputs_that_disagree(
     unmeasured = dataclasses.replace(result, measures=InputMeasures())
     text = replay_command.summary(bag, "x", unmeasured)
     assert (
-        "; speed noise not measured (under 64 blocks in motion); position and speed not "
-        "compared (under 64 blocks in motion); torque along the motion not measured forward, "
-        "not measured reverse\n"
+        "  inputs in motion: speed noise not measured (under 64 blocks in motion); position and "
+        "speed not compared (under 64 blocks in motion); torque along the motion not measured "
+        "forward, not measured reverse\n"
     ) in text
     wrong = replay_command.summary(
         bag, "x", dataclasses.replace(result, measures=InputMeasures(position_per_speed=0.2))
@@ -943,7 +944,7 @@ def test_the_summary_names_the_rejections_by_reason_and_field(bag: Path) -> None
     )
     text = replay_command.summary(bag, "x", rejected)
     assert ", rejected 33 (non_finite 2, out_of_range: speed 30, spike 1); time resets" in text
-    assert ", rejected 0; time resets 0, gaps 0; " in replay_command.summary(bag, "x", result)
+    assert ", rejected 0; time resets 0, gaps 0\n" in replay_command.summary(bag, "x", result)
 
 
 def test_the_summary_says_how_often_the_count_was_right(bag: Path) -> None:
