@@ -22,6 +22,7 @@ from typing import Any
 
 from prsm_health.benchmark import (
     CONFIGURATION_NAMES,
+    GROUPS,
     base_params,
     full_plan,
     quick_plan,
@@ -49,7 +50,7 @@ def add_bench_command(commands: Any) -> None:
         "--scenes",
         nargs="+",
         metavar="NAME",
-        help="scenes or groups (bags, long, two-jam, one-jam, wear-prior) to run; default all",
+        help=f"scenes or groups ({', '.join(GROUPS)}) to run; default all",
     )
     parser.add_argument(
         "--configs",

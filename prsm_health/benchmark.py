@@ -38,7 +38,6 @@ import platform
 import time
 from collections.abc import Callable, Iterable, Iterator, Sequence
 from dataclasses import dataclass, field
-from importlib import resources
 from pathlib import Path
 from typing import Any
 
@@ -58,11 +57,16 @@ from prsm_health.estimation.params import (
     load_params_mapping,
 )
 from prsm_health.replay import CHUNK_SAMPLES, replay
+from prsm_health.scenes.envelope import envelope_scenes
 from prsm_health.scenes.profiles import DownholeCycle
-from prsm_health.scenes.scene import BUNDLED_BAGS, Scene, scene_from_mapping
+from prsm_health.scenes.scene import (
+    BUNDLED_BAGS,
+    Scene,
+    bundled_scene_mapping,
+    scene_from_mapping,
+)
 from prsm_health.scenes.simulator import simulate
 from prsm_health.signals import MotorSamples, TruthSamples
-from prsm_health.yamlio import load_yaml_mapping
 
 LOG = logging.getLogger(__name__)
 
@@ -78,7 +82,7 @@ BAG_SCENES = (
 #: Bags whose first ``naive_seconds`` every configuration runs on, the naive one included.
 NAIVE_SCENES = ("nominal-downhole", "sudden-jam", "radial-misalignment")
 #: Scene groups (``--scenes`` takes a scene name or one of these).
-GROUPS = ("bags", "long", "two-jam", "one-jam", "wear-prior")
+GROUPS = ("bags", "long", "two-jam", "one-jam", "wear-prior", "envelope")
 #: Seeds of the generated runs (fixed: the same plan gives the same scenes).
 TWO_JAM_SEED = 2026
 #: Two-jam runs of the full plan. The first eight of this seed have no second jam at
@@ -89,6 +93,9 @@ ONE_JAM_SEED = 500
 ONE_JAM_RUNS = 8
 WEAR_PRIOR_SEED = 300
 WEAR_PRIOR_RUNS = 20
+#: Two-jam runs of the full plan that the envelope runs again on another screw.
+OTHER_SCREW_RUNS = 8
+OTHER_SCREW = "meng2022-misalignment"
 #: Generated groups of the full plan: (base seed, runs drawn from it (scene seeds base,
 #: base + 1, ...), offset of the base from SEED under ``--held-out SEED``).
 _GENERATED = {
@@ -166,23 +173,20 @@ class BenchScene:
         return config in self.configs
 
 
-def _bundled_mapping(name: str) -> dict[str, Any]:
-    """The parsed YAML of a bundled scene (a fresh dict to modify)."""
-    path = Path(str(resources.files("prsm_health.scenes") / "data" / f"{name}.yaml"))
-    return load_yaml_mapping(path)
-
-
 def _generated(name: str, base: str, **changes: Any) -> Scene:
     """A bundled scene with its name and some keys changed."""
-    mapping = _bundled_mapping(base)
-    mapping.update(name=name, **changes)
-    return scene_from_mapping(mapping)
+    return scene_from_mapping(bundled_scene_mapping(base) | changes | {"name": name})
 
 
-def two_jam_scenes(count: int, *, seed: int = TWO_JAM_SEED) -> list[Scene]:
+def two_jam_scenes(
+    count: int, *, seed: int = TWO_JAM_SEED, preset: str | None = None
+) -> list[Scene]:
     """``count`` nominal downhole runs of 40-60 s with two jams of distinct rollers at random
-    times, at least 2 s apart and JAM_MARGIN_S before the end (so a cycle follows each)."""
+    times, at least 2 s apart and JAM_MARGIN_S before the end (so a cycle follows each).
+    ``preset``: the same runs with another screw in the actuator, named
+    ``two-jam-<i>-<preset>`` (the same motion, loads and jams)."""
     rng = np.random.default_rng(seed)
+    actuator = bundled_scene_mapping("nominal-downhole")["actuator"] | {"preset": preset}
     scenes = []
     for i in range(count):
         duration = round(float(rng.uniform(40.0, 60.0)), 1)
@@ -195,15 +199,12 @@ def two_jam_scenes(count: int, *, seed: int = TWO_JAM_SEED) -> list[Scene]:
             {"time_s": round(float(t), 3), "roller": int(r)}
             for t, r in zip(times, rollers, strict=True)
         ]
-        scenes.append(
-            _generated(
-                f"two-jam-{i + 1}",
-                "nominal-downhole",
-                duration_s=duration,
-                seed=seed + i,
-                jams=jams,
-            )
-        )
+        name = f"two-jam-{i + 1}"
+        changes: dict[str, Any] = {"duration_s": duration, "seed": seed + i, "jams": jams}
+        if preset is not None:
+            changes |= {"actuator": actuator, "description": f"{name} on {preset}'s screw"}
+            name = f"{name}-{preset}"
+        scenes.append(_generated(name, "nominal-downhole", **changes))
     return scenes
 
 
@@ -264,6 +265,8 @@ class Plan:
     naive_seconds: the excerpt. repeats: runs of the default replay and of the decode
     baseline per bag (the best counts). wear_bag: the accelerated-wear bag for the run with
     the true wear factor (None: not run). wear_prior: its runs (default configuration).
+    envelope: scenes beyond the downhole ones (default configuration, told the count where
+    they have jams; reported apart from the floors).
     params_file: the estimator parameters every run starts from (None: the bundled
     config/default.yaml); each scene's actuator replaces the file's (:func:`params_for`).
     """
@@ -277,12 +280,13 @@ class Plan:
     repeats: int
     wear_bag: Path | None
     wear_prior: tuple[Scene, ...]
+    envelope: tuple[Scene, ...] = ()
     params_file: Path | None = None
 
 
 def _bag_scenes(bags: Path, names: Iterable[str]) -> list[BenchScene]:
     return [
-        BenchScene(name, "bags", scene_from_mapping(_bundled_mapping(name)), bag=bags / name)
+        BenchScene(name, "bags", scene_from_mapping(bundled_scene_mapping(name)), bag=bags / name)
         for name in names
     ]
 
@@ -345,6 +349,10 @@ def full_plan(bags: Path = BUNDLED_BAGS, *, held_out: int | None = None) -> Plan
         repeats=3,
         wear_bag=bags / "accelerated-wear",
         wear_prior=tuple(wear_prior_scenes(WEAR_PRIOR_RUNS, 30.0, seed=seeds["wear-prior"])),
+        envelope=(
+            *envelope_scenes(),
+            *two_jam_scenes(OTHER_SCREW_RUNS, seed=seeds["two-jam"], preset=OTHER_SCREW),
+        ),
     )
 
 
@@ -400,6 +408,7 @@ def select(plan: Plan, *, scenes: list[str] | None, configs: list[str] | None) -
         naive_scenes=tuple(n for n in plan.naive_scenes if n in wanted or "bags" in wanted),
         wear_bag=plan.wear_bag if wanted & {"accelerated-wear", "bags"} else None,
         wear_prior=plan.wear_prior if "wear-prior" in wanted else (),
+        envelope=plan.envelope if "envelope" in wanted else (),
     )
 
 
@@ -552,6 +561,21 @@ class ToldCountRun(ScoredRun):
 
 
 @dataclass(frozen=True)
+class EnvelopeRun(ScoredRun):
+    """The default configuration on a scene of the envelope (:attr:`Plan.envelope`).
+
+    description: what differs from the downhole scenes. metrics: :func:`score` against the
+    truth. told: the same run told the true count at each onset (None without jams).
+    """
+
+    scene: str
+    description: str
+    metrics: Metrics
+    largest_load_n: float
+    told: Metrics | None
+
+
+@dataclass(frozen=True)
 class BenchResults:
     """Everything one benchmark run measured."""
 
@@ -565,6 +589,7 @@ class BenchResults:
     wear_prior: list[WearRun]
     told_count: list[ToldCountRun]
     elapsed_s: float
+    envelope: list[EnvelopeRun] = field(default_factory=list)
 
     def runs_of(self, *, kind: str = "full", config: str | None = None) -> list[Run]:
         """The runs of one kind (and configuration)."""
@@ -610,7 +635,7 @@ def skipped_configurations(
 ) -> dict[str, str]:
     """Configurations that act exactly like the default with ``base`` (default: the bundled
     parameters; ``radial-on`` while "auto" resolves to on), with the reason."""
-    scene = scene_from_mapping(_bundled_mapping("nominal-downhole"))
+    scene = scene_from_mapping(bundled_scene_mapping("nominal-downhole"))
     default = _effective(params_for(scene, Fidelity(), base=base))
     return {
         c.name: "acts exactly as default (radial_terms auto resolves to the same)"
@@ -886,11 +911,28 @@ class _Bench:
         """accelerated-wear with the estimator told the scene's true wear factor."""
         truth = _truth(bag)
         factor = float(truth.wear_coefficient_factor[0])
-        scene = scene_from_mapping(_bundled_mapping(bag.name))
+        scene = scene_from_mapping(bundled_scene_mapping(bag.name))
         params = params_for(scene, Fidelity(), base=self.base, wear_factor=factor)
         return _wear_run(
             bag.name, factor, factor, scored(replay(bag, params).states, truth, params)
         )
+
+    def envelope(self, scenes: Iterable[Scene]) -> list[EnvelopeRun]:
+        """The default configuration on each scene, and told the count where it has jams."""
+        found = []
+        for scene in scenes:
+            begin = time.perf_counter()
+            result = simulate(scene)
+            params = params_for(scene, Fidelity(), base=self.base)
+            states, _ = chunked(params, result.motor)
+            told = None
+            if len(result.truth.jam_onsets):
+                told = scored(told_count(params, result.motor, result.truth), result.truth, params)
+            metrics = scored(states, result.truth, params)
+            largest = params.actuator.preset.largest_axial_load_n
+            found.append(EnvelopeRun(scene.name, scene.description, metrics, largest, told))
+            self.progress(f"envelope {scene.name}: {time.perf_counter() - begin:.1f} s")
+        return found
 
     def wear_prior(self, scenes: Iterable[Scene]) -> list[WearRun]:
         """Runs whose wear factor is drawn from the prior, the estimator's left at 1."""
@@ -975,6 +1017,7 @@ def run_benchmark(plan: Plan, *, progress: Callable[[str], None] = LOG.info) -> 
         bench.scene(scene)
     true_factor = bench.wear_true_factor(plan.wear_bag) if plan.wear_bag is not None else None
     prior = bench.wear_prior(plan.wear_prior)
+    envelope = bench.envelope(plan.envelope)
     return BenchResults(
         mode=plan.mode,
         machine=load,
@@ -1002,6 +1045,10 @@ def run_benchmark(plan: Plan, *, progress: Callable[[str], None] = LOG.info) -> 
             },
             "wear_prior_runs": len(plan.wear_prior),
             "wear_prior_seconds": plan.wear_prior[0].duration_s if plan.wear_prior else None,
+            "envelope": [
+                {"name": s.name, "description": s.description, "seed": s.seed}
+                for s in plan.envelope
+            ],
         },
         skipped_configs=bench.skipped,
         runs=bench.runs,
@@ -1010,4 +1057,5 @@ def run_benchmark(plan: Plan, *, progress: Callable[[str], None] = LOG.info) -> 
         wear_prior=prior,
         told_count=bench.told,
         elapsed_s=time.perf_counter() - started,
+        envelope=envelope,
     )

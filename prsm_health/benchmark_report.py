@@ -415,6 +415,17 @@ def results_json(results: BenchResults, found: list[Floor]) -> dict[str, Any]:
                 }
                 for r in results.told_count
             ],
+            "envelope": [
+                {
+                    "scene": r.scene,
+                    "description": r.description,
+                    "load_rmse_percent_largest": r.rmse_percent_largest,
+                    "largest_load_n": r.largest_load_n,
+                    "metrics": r.metrics.to_dict(),
+                    "told_metrics": None if r.told is None else r.told.to_dict(),
+                }
+                for r in results.envelope
+            ],
         }
     )
     return document
@@ -668,6 +679,38 @@ def _told(results: BenchResults) -> list[str]:
     return _table(header, rows)
 
 
+def _envelope(results: BenchResults) -> list[str]:
+    """Each scene of the envelope: the default's load RMSE, its largest error and NEES, the
+    jams found (delay per onset) and false declarations, and the RMSE told the count."""
+    rows = []
+    for run in results.envelope:
+        m = run.metrics
+        told = run.told
+        rows.append(
+            [
+                run.scene,
+                run.description,
+                f"{run.rmse_percent_largest:.2f}",
+                f"{m.load_max_error_n / 1e3:.2f}",
+                f"{m.load_nees_mean:.2f}",
+                ", ".join(_delay(j.delay_s) for j in m.jams) or "-",
+                str(m.false_jam_declarations),
+                "-" if told is None else f"{100.0 * told.load_rmse_n / run.largest_load_n:.2f}",
+            ]
+        )
+    header = [
+        "scene",
+        "what differs",
+        "RMSE %",
+        "max err kN",
+        "NEES",
+        "jams found after",
+        "false jams",
+        "RMSE % told",
+    ]
+    return _table(header, rows)
+
+
 def _probability(p: float) -> str:
     """A probability; near 1 as 1 minus its complement, which ``.6f`` rounds away."""
     if not math.isfinite(p):
@@ -801,6 +844,16 @@ def markdown(results: BenchResults, found: list[Floor]) -> str:
         *_calibration(results),
     ]
     lines += ["", "## Precision loss (default configuration)", "", *_wear(results)]
+    if results.envelope:
+        lines += [
+            "",
+            "## Beyond the downhole scenes (default configuration; not scored by the floors)",
+            "",
+            "The envelope's scenes (`scenes/envelope.py`): one thing of a bundled scene changed.",
+            "RMSE in % of the preset's largest paper load; told: the count told at each onset.",
+            "",
+            *_envelope(results),
+        ]
     lines += ["", "## Every full run", "", *_runs_table(results.runs_of(), DETAIL_COLUMNS), ""]
     return "\n".join(lines)
 

@@ -74,6 +74,9 @@ def results(tmp_path_factory: pytest.TempPathFactory) -> BenchResults:
     wear = scene_from_mapping(
         downhole(name="tiny-wear", duration_s=4.0, wear={"prior_sigma_ln": 0.5})
     )
+    envelope = scene_from_mapping(
+        downhole(name="tiny-envelope", description="a jam at 2.5 s", duration_s=6.0, jams=jam)
+    )
     plan = Plan(
         mode="test",
         scenes=(
@@ -87,6 +90,7 @@ def results(tmp_path_factory: pytest.TempPathFactory) -> BenchResults:
         repeats=2,
         wear_bag=None,
         wear_prior=(wear,),
+        envelope=(envelope,),
     )
     return run_benchmark(plan, progress=lambda _: None)
 
@@ -149,6 +153,46 @@ def test_runs_with_jams_are_run_again_told_the_count(results: BenchResults, tmp_
     assert f"| tiny-bag | {results.runs_of(config='default')[0].rmse_percent_largest:.2f} |" in text
     document = json.loads((tmp_path / "out" / "results.json").read_text())
     assert document["told_count"][0]["metrics"]["load_rmse_n"] == told.metrics.load_rmse_n
+
+
+def test_envelope_runs_are_reported_apart_from_the_floors(
+    results: BenchResults, tmp_path: Path
+) -> None:
+    """The envelope's scene runs in the default configuration and told the count, and is in
+    its own table and JSON entry only: no floor, onset, told-count or full-run list has it."""
+    (run,) = results.envelope
+    assert (run.scene, run.description) == ("tiny-envelope", "a jam at 2.5 s")
+    (jam,) = run.metrics.jams
+    assert jam.onset_s == pytest.approx(2.5, abs=0.01)
+    assert run.told is not None and run.told.jams[0].delay_s is not None
+    scored_elsewhere = (
+        {r.scene for r in results.runs}
+        | {o.scene for o in results.jam_onsets}
+        | {t.scene for t in results.told_count}
+    )
+    assert "tiny-envelope" not in scored_elsewhere
+    found = write_results(results, tmp_path / "out")
+    assert all("tiny-envelope" not in f.measured for f in found)
+    text = (tmp_path / "out" / "results.md").read_text()
+    (row,) = table_under(text, "## Beyond the downhole scenes")
+    told_rmse = 100.0 * run.told.load_rmse_n / 55_000.0
+    assert row == {
+        "scene": "tiny-envelope",
+        "what differs": "a jam at 2.5 s",
+        "RMSE %": f"{run.rmse_percent_largest:.2f}",
+        "max err kN": f"{run.metrics.load_max_error_n / 1e3:.2f}",
+        "NEES": f"{run.metrics.load_nees_mean:.2f}",
+        "jams found after": "never" if jam.delay_s is None else f"{jam.delay_s:.2f} s",
+        "false jams": str(run.metrics.false_jam_declarations),
+        "RMSE % told": f"{told_rmse:.2f}",
+    }
+    document = json.loads((tmp_path / "out" / "results.json").read_text())
+    (entry,) = document["envelope"]
+    assert entry["metrics"]["load_rmse_n"] == run.metrics.load_rmse_n
+    assert entry["told_metrics"]["load_rmse_n"] == run.told.load_rmse_n
+    assert document["plan"]["envelope"] == [
+        {"name": "tiny-envelope", "description": "a jam at 2.5 s", "seed": 5}
+    ]
 
 
 def test_told_the_count_the_load_is_right_where_the_count_is_not_identifiable() -> None:
@@ -372,6 +416,22 @@ def test_two_jam_runs_are_reproducible_and_leave_a_cycle_after_each_jam() -> Non
         assert first.roller != second.roller
 
 
+def test_two_jam_runs_on_another_screw_are_the_same_runs_with_its_screw() -> None:
+    for run, other in zip(
+        two_jam_scenes(3), two_jam_scenes(3, preset="meng2022-misalignment"), strict=True
+    ):
+        assert other.name == f"{run.name}-meng2022-misalignment"
+        assert other.actuator.preset.name == "meng2022-misalignment"
+        assert other.actuator.drive_train == run.actuator.drive_train
+        kept = {f.name for f in dataclasses.fields(run)} - {
+            "name",
+            "description",
+            "actuator",
+            "actuator_yaml",
+        }
+        assert all(getattr(other, k) == getattr(run, k) for k in kept)
+
+
 def test_one_jam_runs_are_reproducible_with_one_jam_in_their_first_minute() -> None:
     scenes = one_jam_scenes(4, 300.0)
     assert [s.jams for s in scenes] == [s.jams for s in one_jam_scenes(4, 300.0)]
@@ -413,7 +473,12 @@ def test_selection_by_name_and_group_and_unknown_names() -> None:
     chosen = select(plan, scenes=["two-jam"], configs=["default"])
     assert [s.name for s in chosen.scenes] == ["two-jam-1"]
     assert [c.name for c in chosen.configs] == ["default"]
-    assert chosen.wear_bag is None and chosen.wear_prior == ()
+    assert chosen.wear_bag is None and chosen.wear_prior == () and chosen.envelope == ()
+    full = full_plan()
+    envelope = select(full, scenes=["envelope"], configs=None)
+    assert envelope.scenes == () and envelope.envelope == full.envelope
+    names = [s.name for s in full.envelope]
+    assert "sine-jam" in names and "two-jam-8-meng2022-misalignment" in names
     with pytest.raises(ValueError, match="unknown nope"):
         select(plan, scenes=["nope"], configs=None)
     with pytest.raises(ValueError, match="unknown fast"):
@@ -538,9 +603,10 @@ def test_a_plan_without_scene_runs_still_draws_its_pareto(tmp_path: Path) -> Non
 
 
 def table_under(text: str, heading: str) -> list[dict[str, str]]:
-    """The rows, by column, of the Markdown table after the line starting with ``heading``."""
-    after = text.split("\n" + heading, 1)[1].split("\n\n", 1)[1]
-    lines = after.split("\n\n", 1)[0].splitlines()
+    """The rows, by column, of the first Markdown table after the line starting with
+    ``heading``."""
+    after = text.split("\n" + heading, 1)[1].split("\n\n")[1:]
+    lines = next(p for p in after if p.startswith("|")).splitlines()
     cells = [[c.strip() for c in re.split(r"(?<!\\)\|", line)[1:-1]] for line in lines]
     header, _, *rows = cells
     return [dict(zip(header, row, strict=True)) for row in rows]

@@ -199,6 +199,34 @@ def _bundled() -> Path:
     return Path(str(resources.files("prsm_health.scenes") / "data"))
 
 
+def bundled_scene_mapping(name: str) -> dict[str, Any]:
+    """The parsed YAML of the bundled scene ``name`` (a fresh dict to modify)."""
+    return load_yaml_mapping(_bundled() / f"{name}.yaml")
+
+
+def varied_scene(base: str, name: str, description: str, **changes: Any) -> Scene:
+    """The bundled scene ``base`` renamed, described and changed by ``changes``: a section
+    given as a mapping is merged into the base's section key by key, unless its ``type``
+    differs (a sine profile in place of a downhole cycle), which replaces the section."""
+    mapping = _merged(bundled_scene_mapping(base), changes)
+    return scene_from_mapping(mapping | {"name": name, "description": description})
+
+
+def _merged(base: dict[str, Any], changes: dict[str, Any]) -> dict[str, Any]:
+    merged = dict(base)
+    for key, value in changes.items():
+        before = base.get(key)
+        if (
+            isinstance(value, dict)
+            and isinstance(before, dict)
+            and value.get("type", before.get("type")) == before.get("type")
+        ):
+            merged[key] = _merged(before, value)
+        else:
+            merged[key] = value
+    return merged
+
+
 def scene_names() -> tuple[str, ...]:
     """Names of the bundled scenes."""
     return tuple(sorted(p.stem for p in _bundled().glob("*.yaml")))

@@ -9,9 +9,10 @@ import pytest
 import yaml
 
 from prsm_health.physics.errors import ParameterError
+from prsm_health.scenes.envelope import SINE_PROFILE, envelope_scenes
 from prsm_health.scenes.faults import NonFinite
-from prsm_health.scenes.profiles import DownholeCycle, HoldProfile
-from prsm_health.scenes.scene import load_scene, scene_names
+from prsm_health.scenes.profiles import DownholeCycle, HoldProfile, SineProfile
+from prsm_health.scenes.scene import load_scene, scene_names, varied_scene
 
 BUNDLED = (
     "accelerated-wear",
@@ -163,3 +164,29 @@ def test_a_relative_preset_path_is_taken_from_the_scene_files_folder(
     (tmp_path / "presets").mkdir()  # one beside the working directory is not read
     (tmp_path / "presets" / "mine.yaml").write_text("not: a preset\n")
     assert load_scene(str(project / "scene.yaml")).actuator.preset.name == "mine"
+
+
+def test_a_varied_scene_merges_sections_of_the_same_type_and_replaces_the_others() -> None:
+    """sudden-jam at 100 rpm keeps its cycle's stroke and loads; a sine profile replaces the
+    cycle whole (a merge would have left the cycle's keys in it, refused)."""
+    base = load_scene("sudden-jam")
+    slow = varied_scene("sudden-jam", "slow", "at 100 rpm", profile={"speed_rpm": 100.0})
+    assert isinstance(slow.profile, DownholeCycle) and isinstance(base.profile, DownholeCycle)
+    assert slow.profile.speed_rpm == (100.0, 100.0)
+    assert slow.profile.stroke_m == base.profile.stroke_m
+    assert slow.profile.traction_load_n == base.profile.traction_load_n
+    assert (slow.name, slow.description, slow.jams) == ("slow", "at 100 rpm", base.jams)
+    sine = varied_scene("sudden-jam", "sine", "sine strokes", profile=SINE_PROFILE, jams=[])
+    assert isinstance(sine.profile, SineProfile) and sine.jams == ()
+    assert sine.radial_load == base.radial_load
+
+
+def test_the_envelope_scenes_build_with_their_own_names_and_descriptions() -> None:
+    scenes = envelope_scenes()
+    names = [s.name for s in scenes]
+    assert len(set(names)) == len(names) and not set(names) & set(scene_names())
+    assert all(s.description for s in scenes)
+    assert [s.name for s in envelope_scenes()] == names  # the same run to run
+    other = {s.name: s.actuator.preset.name for s in scenes}
+    assert other["sudden-jam-other-screw"] == "meng2022-misalignment"
+    assert other["sudden-jam-650rpm"] == "dong2022-downhole"

@@ -1,0 +1,165 @@
+"""Scenes beyond the downhole cycle the estimator's settings were chosen on: the envelope.
+
+Each is a bundled scene with one thing changed (:func:`~prsm_health.scenes.scene.varied_scene`):
+the speed, the traction or the wall's load, the drive train, the screw, or the motion itself (a
+ramp, an assisting load, sine strokes that reverse without stopping). ``prsm-health bench
+--scenes envelope`` runs them in the default configuration, told the count too where they have
+jams, and reports them apart from the floors, which are the downhole scenes'
+(docs/performance.md, "Motion and loads beyond the downhole scenes").
+"""
+
+from __future__ import annotations
+
+from typing import Any
+
+from prsm_health.scenes.scene import Scene, varied_scene
+
+#: The sine strokes: 300 rpm either way, a 4 s period, a load of 20 kN that resists the motion.
+SINE_PROFILE = {
+    "type": "sine",
+    "speed_amplitude_rpm": 300.0,
+    "speed_offset_rpm": 0.0,
+    "period_s": 4.0,
+    "axial_load_n": 20000.0,
+}
+#: A load ramp at a rising speed, over the whole of a 30 s run.
+_RAMP = {
+    "type": "ramp",
+    "speed_start_rpm": 100.0,
+    "speed_end_rpm": 600.0,
+    "axial_load_start_n": 10000.0,
+    "axial_load_end_n": 45000.0,
+    "ramp_s": 30.0,
+}
+#: A load that pushes the way the screw moves (back-driving) at a constant 300 rpm.
+_ASSIST = {
+    "type": "ramp",
+    "speed_start_rpm": 300.0,
+    "speed_end_rpm": 300.0,
+    "axial_load_start_n": -20000.0,
+    "axial_load_end_n": -30000.0,
+    "ramp_s": 20.0,
+}
+_RAMP_JAMS = [{"time_s": 12.0, "roller": 3}, {"time_s": 22.0, "roller": 7}]
+_ASSIST_JAM = [{"time_s": 8.0, "roller": 3}]
+_SINE_JAM = [{"time_s": 10.3, "roller": 3}]
+_OTHER_SCREW = "meng2022-misalignment"
+
+
+def _drive_train(*, gear_ratio: float, torque_constant_nm_per_a: float) -> dict[str, Any]:
+    """Another drive train in the actuator, with the current limit that lets it reach the
+    downhole loads (60 A)."""
+    drive = {"gear_ratio": gear_ratio, "torque_constant_nm_per_a": torque_constant_nm_per_a}
+    return {"actuator": {"drive_train": drive | {"max_current_a": 60.0}}}
+
+
+#: (name, base scene, what differs, changes): sudden-jam's variants keep its jams (rollers 4
+#: and 9, whose ripples cancel, at 4.5 and 25.0 s).
+_ENVELOPE: tuple[tuple[str, str, str, dict[str, Any]], ...] = (
+    (
+        "ramp-jams",
+        "nominal-downhole",
+        "100 to 600 rpm and 10 to 45 kN over 30 s, jams at 12 and 22 s",
+        {"profile": _RAMP, "duration_s": 30.0, "seed": 11, "jams": _RAMP_JAMS},
+    ),
+    (
+        "ramp",
+        "nominal-downhole",
+        "the same without jams",
+        {"profile": _RAMP, "duration_s": 30.0, "seed": 11},
+    ),
+    (
+        "assist-jam",
+        "nominal-downhole",
+        "an assisting load, -20 to -30 kN at 300 rpm (back-driving), a jam at 8 s",
+        {"profile": _ASSIST, "duration_s": 20.0, "seed": 13, "jams": _ASSIST_JAM},
+    ),
+    (
+        "assist",
+        "nominal-downhole",
+        "the same without the jam",
+        {"profile": _ASSIST, "duration_s": 20.0, "seed": 13},
+    ),
+    ("sudden-jam-100rpm", "sudden-jam", "sudden-jam at 100 rpm", {"profile": {"speed_rpm": 100.0}}),
+    ("sudden-jam-650rpm", "sudden-jam", "sudden-jam at 650 rpm", {"profile": {"speed_rpm": 650.0}}),
+    (
+        "sudden-jam-light",
+        "sudden-jam",
+        "sudden-jam, a traction of 3-8 kN",
+        {"profile": {"traction_load_n": [3000.0, 8000.0]}},
+    ),
+    (
+        "sudden-jam-wall-12kN",
+        "sudden-jam",
+        "sudden-jam, a wall's radial load up to 12 kN",
+        {"radial_load": {"max_n": 12000.0}},
+    ),
+    (
+        "sudden-jam-gear-10",
+        "sudden-jam",
+        "sudden-jam, a 10:1 gearbox and 0.3 N·m/A",
+        _drive_train(gear_ratio=10.0, torque_constant_nm_per_a=0.3),
+    ),
+    (
+        "sudden-jam-direct",
+        "sudden-jam",
+        "sudden-jam, a direct drive and 1.2 N·m/A",
+        _drive_train(gear_ratio=1.0, torque_constant_nm_per_a=1.2),
+    ),
+    (
+        "sudden-jam-other-screw",
+        "sudden-jam",
+        f"sudden-jam on the screw of papers 001/004 ({_OTHER_SCREW})",
+        {"actuator": {"preset": _OTHER_SCREW}},
+    ),
+    (
+        "nominal-other-screw",
+        "sudden-jam",
+        "the same without jams",
+        {"actuator": {"preset": _OTHER_SCREW}, "jams": []},
+    ),
+    (
+        "sine",
+        "nominal-downhole",
+        "sine strokes, 300 rpm, a period of 4 s, 20 kN resisting, 40 s",
+        {"profile": SINE_PROFILE, "duration_s": 40.0, "seed": 12},
+    ),
+    (
+        "sine-jam",
+        "nominal-downhole",
+        "the same, a jam at 10.3 s",
+        {"profile": SINE_PROFILE, "duration_s": 40.0, "seed": 12, "jams": _SINE_JAM},
+    ),
+    (
+        "sine-slow",
+        "nominal-downhole",
+        "sine strokes, a period of 40 s, 90 s",
+        {"profile": SINE_PROFILE | {"period_s": 40.0}, "duration_s": 90.0, "seed": 12},
+    ),
+    (
+        "sine-tilted",
+        "radial-misalignment",
+        "sine strokes, 20 kN, a wall of 4-8 kN, the screw tilted 2'",
+        {"profile": SINE_PROFILE},
+    ),
+    (
+        "sine-radial",
+        "stationary-hold",
+        "sine strokes, 20 kN, 3 kN radial",
+        {"profile": SINE_PROFILE},
+    ),
+    (
+        "sine-faults",
+        "sensor-faults",
+        "sine strokes, 20 kN, a wall of 0-8 kN, the sensor faults of sensor-faults",
+        {"profile": SINE_PROFILE},
+    ),
+)
+
+
+def envelope_scenes() -> list[Scene]:
+    """The envelope's scenes, in a fixed order (the same run to run)."""
+    return [
+        varied_scene(base, name, description, **changes)
+        for name, base, description, changes in _ENVELOPE
+    ]
