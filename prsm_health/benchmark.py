@@ -186,7 +186,6 @@ def two_jam_scenes(
     ``preset``: the same runs with another screw in the actuator, named
     ``two-jam-<i>-<preset>`` (the same motion, loads and jams)."""
     rng = np.random.default_rng(seed)
-    actuator = bundled_scene_mapping("nominal-downhole")["actuator"] | {"preset": preset}
     scenes = []
     for i in range(count):
         duration = round(float(rng.uniform(40.0, 60.0)), 1)
@@ -202,6 +201,7 @@ def two_jam_scenes(
         name = f"two-jam-{i + 1}"
         changes: dict[str, Any] = {"duration_s": duration, "seed": seed + i, "jams": jams}
         if preset is not None:
+            actuator = bundled_scene_mapping("nominal-downhole")["actuator"] | {"preset": preset}
             changes |= {"actuator": actuator, "description": f"{name} on {preset}'s screw"}
             name = f"{name}-{preset}"
         scenes.append(_generated(name, "nominal-downhole", **changes))
@@ -573,6 +573,11 @@ class EnvelopeRun(ScoredRun):
     metrics: Metrics
     largest_load_n: float
     told: Metrics | None
+
+    @property
+    def told_rmse_percent_largest(self) -> float | None:
+        """Told the count: load RMSE while moving, % of the largest paper load."""
+        return None if self.told is None else 100.0 * self.told.load_rmse_n / self.largest_load_n
 
 
 @dataclass(frozen=True)

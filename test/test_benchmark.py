@@ -176,6 +176,7 @@ def test_envelope_runs_are_reported_apart_from_the_floors(
     text = (tmp_path / "out" / "results.md").read_text()
     (row,) = table_under(text, "## Beyond the downhole scenes")
     told_rmse = 100.0 * run.told.load_rmse_n / 55_000.0
+    assert run.told_rmse_percent_largest == pytest.approx(told_rmse)
     assert row == {
         "scene": "tiny-envelope",
         "what differs": "a jam at 2.5 s",
@@ -190,6 +191,7 @@ def test_envelope_runs_are_reported_apart_from_the_floors(
     (entry,) = document["envelope"]
     assert entry["metrics"]["load_rmse_n"] == run.metrics.load_rmse_n
     assert entry["told_metrics"]["load_rmse_n"] == run.told.load_rmse_n
+    assert entry["told_load_rmse_percent_largest"] == run.told_rmse_percent_largest
     assert document["plan"]["envelope"] == [
         {"name": "tiny-envelope", "description": "a jam at 2.5 s", "seed": 5}
     ]
