@@ -1,8 +1,9 @@
 """Scenes beyond the downhole cycle the estimator's settings were chosen on: the envelope.
 
 Each is a bundled scene with one thing changed (:func:`~prsm_health.scenes.scene.varied_scene`):
-the speed, the traction or the wall's load, the drive train, the screw, or the motion itself (a
-ramp, an assisting load, sine strokes that reverse without stopping). ``prsm-health bench
+the speed, the traction or the wall's load, the drive train, the screw, the drive's sensors or
+sample rate, or the motion itself (a ramp, an assisting load, sine strokes that reverse
+without stopping). ``prsm-health bench
 --scenes envelope`` runs them in the default configuration, told the count too where they have
 jams, and reports them apart from the floors, which are the downhole scenes'
 (docs/performance.md, "Motion and loads beyond the downhole scenes").
@@ -117,6 +118,31 @@ _ENVELOPE: tuple[tuple[str, str, str, dict[str, Any]], ...] = (
         "sudden-jam",
         "the same without jams",
         {"actuator": {"preset": _OTHER_SCREW}, "jams": []},
+    ),
+    (
+        "radial-misalignment-encoder-1024",
+        "radial-misalignment",
+        "radial-misalignment, an encoder of 1024 counts a turn differenced into the speed",
+        {"sensors": {"encoder_counts_per_rev": 1024}},
+    ),
+    (
+        "sudden-jam-encoder-1024",
+        "sudden-jam",
+        "sudden-jam, an encoder of 1024 counts a turn differenced into the speed",
+        {"sensors": {"encoder_counts_per_rev": 1024}},
+    ),
+    (
+        "sudden-jam-current-noise",
+        "sudden-jam",
+        "sudden-jam, a current noise of 0.2 A (0.05)",
+        {"sensors": {"current_noise_std_a": 0.2}},
+    ),
+    ("sudden-jam-100Hz", "sudden-jam", "sudden-jam sampled at 100 Hz", {"rate_hz": 100.0}),
+    (
+        "radial-misalignment-50Hz",
+        "radial-misalignment",
+        "radial-misalignment sampled at 50 Hz (below the input health's 100 Hz)",
+        {"rate_hz": 50.0, "truth_rate_hz": 50.0},
     ),
     (
         "sine",
