@@ -41,13 +41,15 @@ Estimates are stamped with the sensor's clock. When that clock jumps back (an es
 event TIME_RESET) or its stamps skip ahead (estimates further apart than SKIP_SPACINGS times
 their usual spacing: a clock that jumped ahead, or missing data), the estimates after it are
 put back on the truth's time line by the offset that best matches their screw speed to the
-truth's (searched within +-MAX_CLOCK_OFFSET_S; after a skip the offset before it is kept
-unless another matches clearly better); the offsets found are reported, one per jump or skip.
+truth's (searched within +-MAX_CLOCK_OFFSET_S of a guess that is kept unless another matches
+clearly better: after a skip the offset before it, after a TIME_RESET the one that lets the
+estimates go on at their usual spacing); the offsets found are reported, one per jump or skip.
 """
 
 from __future__ import annotations
 
 import math
+from collections.abc import Callable
 from dataclasses import asdict, dataclass, fields
 from typing import Any
 
@@ -292,13 +294,18 @@ def within_truth(stamps: FloatArray, truth: TruthSamples) -> NDArray[np.bool_]:
 
 def _clock_offsets(states: list[HealthState], truth: TruthSamples) -> tuple[float, ...]:
     """The offset of each time line (:func:`_time_lines`) that best matches its estimates'
-    screw speed to the truth's (its first MATCHED_ESTIMATES): after a TIME_RESET searched
-    within +-MAX_CLOCK_OFFSET_S of zero; after a skip, around the offset of the line before
-    it, which is kept unless the rules of SKIP_MATCH_GAIN take another (a gap in the data, or
-    a standstill where every offset matches alike, keeps it)."""
+    screw speed to the truth's (its first MATCHED_ESTIMATES), searched within
+    +-MAX_CLOCK_OFFSET_S of a guess that is kept unless the rules of SKIP_MATCH_GAIN take
+    another (a gap in the data, or a standstill where every offset matches alike, keeps it).
+    The guess: after a skip, the offset of the line before it; after a TIME_RESET, the offset
+    that puts the line after the estimate before it by the time the samples between them
+    took (:func:`_time_between`: the data go on while the clock is set back, whatever by; a
+    guess of zero matched a motion that repeats a period away alike, and missed a clock set
+    back by more than MAX_CLOCK_OFFSET_S)."""
     stamps = np.array([s.stamp_s for s in states])
     speed = np.array([s.screw_speed_rad_s for s in states])
     lines, moving_spacing = _time_lines(states)
+    time_between = _time_between(states, stamps, moving_spacing)
 
     def mismatch(segment: slice, candidates: FloatArray) -> FloatArray:
         matched = slice(segment.start, min(segment.stop, segment.start + MATCHED_ESTIMATES))
@@ -317,20 +324,43 @@ def _clock_offsets(states: list[HealthState], truth: TruthSamples) -> tuple[floa
 
     offsets: list[float] = []
     for segment in lines:
-        reset = states[segment.start].event == EstimateEvent.TIME_RESET
-        before = 0.0 if reset or not offsets else offsets[-1]
+        before = offsets[-1] if offsets else 0.0
+        first = segment.start
+        if states[first].event == EstimateEvent.TIME_RESET and first > 0:
+            last = stamps[first - 1] + before  # on the truth's clock
+            before = last + time_between(first) - stamps[first]
         coarse, _ = best_near(segment, before, MAX_CLOCK_OFFSET_S, COARSE_STEP_S)
         best, found = best_near(segment, coarse, COARSE_STEP_S * 2.0, FINE_STEP_S)
-        if not reset:
-            # The offset before, compared at its own best within the same fine search: its
-            # estimates' speeds are block means that lag their stamps, so any offset found
-            # (a motion's period further on, say) matched better than it held exactly.
-            _, kept = best_near(segment, before, COARSE_STEP_S * 2.0, FINE_STEP_S)
-            long_enough = stamps[segment.stop - 1] - stamps[segment.start] >= MIN_LINE_S
-            jumped = abs(best - before) >= moving_spacing and found * SKIP_MATCH_GAIN < kept
-            best = best if jumped and long_enough else before
-        offsets.append(best)
+        # The guess, compared at its own best within the same fine search: the estimates'
+        # speeds are block means that lag their stamps, so any offset found (a motion's
+        # period further on, say) matched better than the guess held exactly. Kept, it is
+        # kept exactly (the same lag would bias its best by half a block).
+        _, kept = best_near(segment, before, COARSE_STEP_S * 2.0, FINE_STEP_S)
+        long_enough = stamps[segment.stop - 1] - stamps[segment.start] >= MIN_LINE_S
+        jumped = abs(best - before) >= moving_spacing and found * SKIP_MATCH_GAIN < kept
+        offsets.append(best if jumped and long_enough else before)
     return tuple(offsets)
+
+
+def _time_between(
+    states: list[HealthState], stamps: FloatArray, moving_spacing: float
+) -> Callable[[int], float]:
+    """The time from estimate i - 1 to estimate i that their samples took: the samples the
+    estimator counted between them (accepted and rejected: those rejected while it waited
+    for a clock set back to be confirmed took time too) at the input's rate, the median of
+    accepted samples per second between estimates that advance; the usual spacing in motion
+    where the counters do not tell."""
+    counted = np.array([s.samples_accepted + s.samples_rejected for s in states], dtype=float)
+    accepted = np.diff([float(s.samples_accepted) for s in states])
+    steps = np.diff(stamps)
+    advancing = (steps > 0.0) & (accepted > 0.0)
+    rate = float(np.median(accepted[advancing] / steps[advancing])) if advancing.any() else 0.0
+
+    def between(i: int) -> float:
+        samples = counted[i] - counted[i - 1]
+        return samples / rate if rate > 0.0 and samples > 0.0 else moving_spacing
+
+    return between
 
 
 def on_truth_clock(states: list[HealthState], offsets_s: tuple[float, ...]) -> FloatArray:

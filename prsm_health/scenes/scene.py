@@ -207,7 +207,8 @@ def bundled_scene_mapping(name: str) -> dict[str, Any]:
 def varied_scene(base: str, name: str, description: str, **changes: Any) -> Scene:
     """The bundled scene ``base`` renamed, described and changed by ``changes``: a section
     given as a mapping is merged into the base's section key by key, unless its ``type``
-    differs (a sine profile in place of a downhole cycle), which replaces the section."""
+    differs (a sine profile in place of a downhole cycle), which replaces the section; any
+    other value replaces the key's (None: the format's default, e.g. no sensor faults)."""
     mapping = _merged(bundled_scene_mapping(base), changes)
     return scene_from_mapping(mapping | {"name": name, "description": description})
 

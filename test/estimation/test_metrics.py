@@ -209,6 +209,8 @@ def _swaying(seconds: float) -> TruthSamples:
         (lambda t: np.where((t >= 10.0) & (t < 11.0), np.nan, t), (0.0,)),
         # ahead by 3 s at 10 s, then back by 10 s at 20 s (a TIME_RESET)
         (lambda t: t + 3.0 * (t >= 10.0) - 10.0 * (t >= 20.0), (-3.0, 7.0)),
+        # back by 40 s at 20 s, beyond MAX_CLOCK_OFFSET_S: the search about zero missed it
+        (lambda t: t - 40.0 * (t >= 20.0), (40.0,)),
     ],
 )
 def test_a_clock_that_jumps_ahead_is_put_back_on_the_truths_time_line(
@@ -289,6 +291,42 @@ def test_a_periodic_motion_after_a_gap_keeps_its_offset() -> None:
     ]
     metrics = score(states, run, rated_load_n=55e3, largest_screw_speed_rad_s=73.3)
     assert metrics.clock_offsets_s == (0.0,)
+    assert metrics.load_rmse_n < 1.0
+
+
+@pytest.mark.parametrize("waited_s", [0.0, 0.1])
+def test_a_periodic_motion_whose_clock_is_set_back_by_its_period_goes_on(waited_s: float) -> None:
+    """A clock set back by one period of a sine stroke at 20 s: every offset a period apart
+    matches the speed alike, and the search about zero took zero (the estimates after the
+    reset compared with the load 4 s before). The data go on at the reset, so the offset
+    that puts them after the estimate before by the time their samples took is kept; with
+    ``waited_s`` of samples rejected before the reset was confirmed (the estimator's wait,
+    0.1 s on the sensor-fault scenes) counted in that time. Counters of 1 kHz samples."""
+    run = truth(60.0, None)
+    t = run.stamp_s
+    run.screw_speed_rad_s[:] = 30.0 * np.sin(2.0 * np.pi * t / 4.0)
+    run.axial_load_n[:] = 20e3 + 300.0 * np.sin(2.0 * np.pi * t / 13.0)
+    block_s = 0.04
+    states: list[HealthState] = []
+    for end in np.arange(block_s, 60.0, block_s):
+        if 20.0 < end <= 20.0 + waited_s + 1e-9:
+            continue  # rejected, counted below
+        stamp = end - 4.0 * (end > 20.0)
+        event = EstimateEvent.TIME_RESET if states and stamp < states[-1].stamp_s else 0
+        speed = np.mean(np.interp(np.linspace(end - block_s, end, 9), t, run.screw_speed_rad_s))
+        load = float(np.interp(end, t, run.axial_load_n))
+        waited = round(1000 * waited_s) if end > 20.0 else 0
+        states.append(
+            dataclasses.replace(
+                state(float(stamp), load, 100.0, 0, 0.0),
+                screw_speed_rad_s=float(speed),
+                event=event,
+                samples_accepted=round(1000 * end) - waited,
+                samples_rejected=waited,
+            )
+        )
+    metrics = score(states, run, rated_load_n=55e3, largest_screw_speed_rad_s=73.3)
+    assert metrics.clock_offsets_s == pytest.approx((4.0,), abs=1e-3)
     assert metrics.load_rmse_n < 1.0
 
 

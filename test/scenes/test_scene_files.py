@@ -10,7 +10,7 @@ import yaml
 
 from prsm_health.physics.errors import ParameterError
 from prsm_health.scenes.envelope import SINE_PROFILE, envelope_scenes
-from prsm_health.scenes.faults import NonFinite
+from prsm_health.scenes.faults import NonFinite, SensorFaults
 from prsm_health.scenes.profiles import DownholeCycle, HoldProfile, SineProfile
 from prsm_health.scenes.scene import load_scene, scene_names, varied_scene
 
@@ -179,6 +179,11 @@ def test_a_varied_scene_merges_sections_of_the_same_type_and_replaces_the_others
     sine = varied_scene("sudden-jam", "sine", "sine strokes", profile=SINE_PROFILE, jams=[])
     assert isinstance(sine.profile, SineProfile) and sine.jams == ()
     assert sine.radial_load == base.radial_load
+    faulty = load_scene("sensor-faults")
+    assert faulty.sensor_faults != SensorFaults()
+    assert varied_scene("sensor-faults", "clean", "", sensor_faults=None).sensor_faults == (
+        SensorFaults()
+    )
 
 
 def test_the_envelope_scenes_build_with_their_own_names_and_descriptions() -> None:
