@@ -42,14 +42,14 @@ event TIME_RESET) or its stamps skip ahead (estimates further apart than SKIP_SP
 their usual spacing: a clock that jumped ahead, or missing data), the estimates after it are
 put back on the truth's time line by the offset that best matches their screw speed to the
 truth's (searched within +-MAX_CLOCK_OFFSET_S of a guess that is kept unless another matches
-clearly better: after a skip the offset before it, after a TIME_RESET the one that lets the
-estimates go on at their usual spacing); the offsets found are reported, one per jump or skip.
+clearly better: after a skip the offset before it, after a TIME_RESET the one that puts the
+estimates after those before it by the time their samples took); the offsets found are
+reported, one per jump or skip.
 """
 
 from __future__ import annotations
 
 import math
-from collections.abc import Callable
 from dataclasses import asdict, dataclass, fields
 from typing import Any
 
@@ -299,13 +299,13 @@ def _clock_offsets(states: list[HealthState], truth: TruthSamples) -> tuple[floa
     another (a gap in the data, or a standstill where every offset matches alike, keeps it).
     The guess: after a skip, the offset of the line before it; after a TIME_RESET, the offset
     that puts the line after the estimate before it by the time the samples between them
-    took (:func:`_time_between`: the data go on while the clock is set back, whatever by; a
+    took (:func:`_times_between`: the data go on while the clock is set back, whatever by; a
     guess of zero matched a motion that repeats a period away alike, and missed a clock set
     back by more than MAX_CLOCK_OFFSET_S)."""
     stamps = np.array([s.stamp_s for s in states])
     speed = np.array([s.screw_speed_rad_s for s in states])
     lines, moving_spacing = _time_lines(states)
-    time_between = _time_between(states, stamps, moving_spacing)
+    times_between = _times_between(states, stamps, moving_spacing)
 
     def mismatch(segment: slice, candidates: FloatArray) -> FloatArray:
         matched = slice(segment.start, min(segment.stop, segment.start + MATCHED_ESTIMATES))
@@ -328,7 +328,7 @@ def _clock_offsets(states: list[HealthState], truth: TruthSamples) -> tuple[floa
         first = segment.start
         if states[first].event == EstimateEvent.TIME_RESET and first > 0:
             last = stamps[first - 1] + before  # on the truth's clock
-            before = last + time_between(first) - stamps[first]
+            before = last + float(times_between[first]) - stamps[first]
         coarse, _ = best_near(segment, before, MAX_CLOCK_OFFSET_S, COARSE_STEP_S)
         best, found = best_near(segment, coarse, COARSE_STEP_S * 2.0, FINE_STEP_S)
         # The guess, compared at its own best within the same fine search: the estimates'
@@ -342,25 +342,23 @@ def _clock_offsets(states: list[HealthState], truth: TruthSamples) -> tuple[floa
     return tuple(offsets)
 
 
-def _time_between(
+def _times_between(
     states: list[HealthState], stamps: FloatArray, moving_spacing: float
-) -> Callable[[int], float]:
-    """The time from estimate i - 1 to estimate i that their samples took: the samples the
-    estimator counted between them (accepted and rejected: those rejected while it waited
-    for a clock set back to be confirmed took time too) at the input's rate, the median of
-    accepted samples per second between estimates that advance; the usual spacing in motion
-    where the counters do not tell."""
+) -> FloatArray:
+    """[i]: the time from estimate i - 1 to estimate i that their samples took ([0]: none
+    before it): the samples the estimator counted between them (accepted and rejected: those
+    rejected while it waited for a clock set back to be confirmed took time too) at the
+    input's rate, the median of accepted samples per second between estimates that advance;
+    the usual spacing in motion where the counters do not tell."""
     counted = np.array([s.samples_accepted + s.samples_rejected for s in states], dtype=float)
     accepted = np.diff([float(s.samples_accepted) for s in states])
     steps = np.diff(stamps)
     advancing = (steps > 0.0) & (accepted > 0.0)
-    rate = float(np.median(accepted[advancing] / steps[advancing])) if advancing.any() else 0.0
-
-    def between(i: int) -> float:
-        samples = counted[i] - counted[i - 1]
-        return samples / rate if rate > 0.0 and samples > 0.0 else moving_spacing
-
-    return between
+    if not advancing.any():
+        return np.full(len(states), moving_spacing)
+    rate = float(np.median(accepted[advancing] / steps[advancing]))  # > 0
+    samples = np.diff(counted, prepend=counted[:1])
+    return np.where(samples > 0.0, samples / rate, moving_spacing)
 
 
 def on_truth_clock(states: list[HealthState], offsets_s: tuple[float, ...]) -> FloatArray:

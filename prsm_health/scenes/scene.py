@@ -214,6 +214,7 @@ def varied_scene(base: str, name: str, description: str, **changes: Any) -> Scen
 
 
 def _merged(base: dict[str, Any], changes: dict[str, Any]) -> dict[str, Any]:
+    """``base`` with ``changes`` as :func:`varied_scene` applies them (a new dict)."""
     merged = dict(base)
     for key, value in changes.items():
         before = base.get(key)
