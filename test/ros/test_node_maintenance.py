@@ -180,3 +180,25 @@ def test_a_reset_whose_save_failed_is_saved_by_the_next_period(ros: None, tmp_pa
             )
     finally:
         listener.close()
+
+
+@pytest.mark.timeout(120)
+def test_a_burst_of_resets_is_answered_every_one(ros: None, tmp_path: Path) -> None:
+    """50 requests at once from one caller: with the services' default queue (KEEP_LAST 10)
+    the node answered 10 and the other callers waited for ever."""
+    listener = Listener("burst")
+    try:
+        with NodeProcess(
+            tmp_path, "burst", hardware_id="burst", state_file=str(tmp_path / "state.json")
+        ) as node:
+            node.wait_log("configured")
+            client = listener.node.create_client(ResetAfterMaintenance, f"/burst/{SERVICE}")
+            assert client.wait_for_service(timeout_sec=10.0)
+            futures = [client.call_async(request(0, note=f"burst {i}")) for i in range(50)]
+            listener.wait_for(
+                lambda: all(f.done() for f in futures), 30.0, "an answer to every request"
+            )
+            assert all(f.result().success for f in futures)
+            assert node.log().count("reset after maintenance: jammed rollers 0") == 50
+    finally:
+        listener.close()
