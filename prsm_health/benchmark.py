@@ -57,7 +57,7 @@ from prsm_health.estimation.params import (
     load_params_mapping,
 )
 from prsm_health.replay import CHUNK_SAMPLES, replay
-from prsm_health.scenes.envelope import envelope_scenes
+from prsm_health.scenes.envelope import OTHER_SCREW, envelope_scenes
 from prsm_health.scenes.profiles import DownholeCycle
 from prsm_health.scenes.scene import (
     BUNDLED_BAGS,
@@ -95,7 +95,6 @@ WEAR_PRIOR_SEED = 300
 WEAR_PRIOR_RUNS = 20
 #: Two-jam runs of the full plan that the envelope runs again on another screw.
 OTHER_SCREW_RUNS = 8
-OTHER_SCREW = "meng2022-misalignment"
 #: Generated groups of the full plan: (base seed, runs drawn from it (scene seeds base,
 #: base + 1, ...), offset of the base from SEED under ``--held-out SEED``).
 _GENERATED = {
