@@ -65,7 +65,7 @@ from prsm_health.scenes.scene import (
     bundled_scene_mapping,
     scene_from_mapping,
 )
-from prsm_health.scenes.simulator import simulate
+from prsm_health.scenes.simulator import SimulationChunk, simulate
 from prsm_health.signals import MotorSamples, TruthSamples
 
 LOG = logging.getLogger(__name__)
@@ -921,18 +921,23 @@ class _Bench:
             bag.name, factor, factor, scored(replay(bag, params).states, truth, params)
         )
 
+    def _simulated(self, scene: Scene) -> tuple[SimulationChunk, EstimatorParams, Metrics]:
+        """``scene`` simulated in memory, the default configuration's parameters for it, and
+        its chunked estimates' scores."""
+        result = simulate(scene)
+        params = params_for(scene, Fidelity(), base=self.base)
+        states, _ = chunked(params, result.motor)
+        return result, params, scored(states, result.truth, params)
+
     def envelope(self, scenes: Iterable[Scene]) -> list[EnvelopeRun]:
         """The default configuration on each scene, and told the count where it has jams."""
         found = []
         for scene in scenes:
             begin = time.perf_counter()
-            result = simulate(scene)
-            params = params_for(scene, Fidelity(), base=self.base)
-            states, _ = chunked(params, result.motor)
+            result, params, metrics = self._simulated(scene)
             told = None
             if len(result.truth.jam_onsets):
                 told = scored(told_count(params, result.motor, result.truth), result.truth, params)
-            metrics = scored(states, result.truth, params)
             largest = params.actuator.preset.largest_axial_load_n
             found.append(EnvelopeRun(scene.name, scene.description, metrics, largest, told))
             self.progress(f"envelope {scene.name}: {time.perf_counter() - begin:.1f} s")
@@ -942,10 +947,7 @@ class _Bench:
         """Runs whose wear factor is drawn from the prior, the estimator's left at 1."""
         found = []
         for scene in scenes:
-            result = simulate(scene)
-            params = params_for(scene, Fidelity(), base=self.base)
-            states, _ = chunked(params, result.motor)
-            metrics = scored(states, result.truth, params)
+            result, params, metrics = self._simulated(scene)
             factor = float(result.truth.wear_coefficient_factor[0])
             found.append(
                 _wear_run(scene.name, factor, params.model.wear_coefficient_factor, metrics)
