@@ -62,8 +62,8 @@ from prsm_health.scenes.profiles import DownholeCycle
 from prsm_health.scenes.scene import (
     BUNDLED_BAGS,
     Scene,
-    bundled_scene_mapping,
-    scene_from_mapping,
+    load_scene,
+    varied_scene,
 )
 from prsm_health.scenes.simulator import SimulationChunk, simulate
 from prsm_health.signals import MotorSamples, TruthSamples
@@ -172,11 +172,6 @@ class BenchScene:
         return config in self.configs
 
 
-def _generated(name: str, base: str, **changes: Any) -> Scene:
-    """A bundled scene with its name and some keys changed."""
-    return scene_from_mapping(bundled_scene_mapping(base) | changes | {"name": name})
-
-
 def two_jam_scenes(
     count: int, *, seed: int = TWO_JAM_SEED, preset: str | None = None
 ) -> list[Scene]:
@@ -197,13 +192,12 @@ def two_jam_scenes(
             {"time_s": round(float(t), 3), "roller": int(r)}
             for t, r in zip(times, rollers, strict=True)
         ]
-        name = f"two-jam-{i + 1}"
+        name, description = f"two-jam-{i + 1}", None
         changes: dict[str, Any] = {"duration_s": duration, "seed": seed + i, "jams": jams}
         if preset is not None:
-            actuator = bundled_scene_mapping("nominal-downhole")["actuator"] | {"preset": preset}
-            changes |= {"actuator": actuator, "description": f"{name} on {preset}'s screw"}
-            name = f"{name}-{preset}"
-        scenes.append(_generated(name, "nominal-downhole", **changes))
+            changes["actuator"] = {"preset": preset}
+            name, description = f"{name}-{preset}", f"{name} on {preset}'s screw"
+        scenes.append(varied_scene("nominal-downhole", name, description, **changes))
     return scenes
 
 
@@ -217,9 +211,9 @@ def one_jam_scenes(count: int, duration_s: float, *, seed: int = ONE_JAM_SEED) -
         time_s = round(float(rng.uniform(5.0, 60.0)), 3)
         jam = {"time_s": time_s, "roller": int(rng.integers(1, 11))}
         scenes.append(
-            _generated(
-                f"one-jam-{i + 1}",
+            varied_scene(
                 "nominal-downhole",
+                f"one-jam-{i + 1}",
                 duration_s=duration_s,
                 seed=seed + i,
                 jams=[jam],
@@ -231,9 +225,9 @@ def one_jam_scenes(count: int, duration_s: float, *, seed: int = ONE_JAM_SEED) -
 def wear_prior_scenes(count: int, duration_s: float, *, seed: int = WEAR_PRIOR_SEED) -> list[Scene]:
     """Accelerated-wear runs with the wear coefficient drawn from the prior (sigma_ln 0.5)."""
     return [
-        _generated(
-            f"wear-prior-{i + 1}",
+        varied_scene(
             "accelerated-wear",
+            f"wear-prior-{i + 1}",
             duration_s=duration_s,
             seed=seed + i,
             wear={"prior_sigma_ln": 0.5},
@@ -284,10 +278,7 @@ class Plan:
 
 
 def _bag_scenes(bags: Path, names: Iterable[str]) -> list[BenchScene]:
-    return [
-        BenchScene(name, "bags", scene_from_mapping(bundled_scene_mapping(name)), bag=bags / name)
-        for name in names
-    ]
+    return [BenchScene(name, "bags", load_scene(name), bag=bags / name) for name in names]
 
 
 def held_out_seeds(seed: int) -> dict[str, int]:
@@ -322,7 +313,7 @@ def full_plan(bags: Path = BUNDLED_BAGS, *, held_out: int | None = None) -> Plan
         BenchScene(
             name,
             "long",
-            _generated(name, "nominal-downhole", duration_s=duration_s, seed=seeds[name]),
+            varied_scene("nominal-downhole", name, duration_s=duration_s, seed=seeds[name]),
             configs=configs,
         )
         for name, duration_s, configs in (
@@ -639,7 +630,7 @@ def skipped_configurations(
 ) -> dict[str, str]:
     """Configurations that act exactly like the default with ``base`` (default: the bundled
     parameters; ``radial-on`` while "auto" resolves to on), with the reason."""
-    scene = scene_from_mapping(bundled_scene_mapping("nominal-downhole"))
+    scene = load_scene("nominal-downhole")
     default = _effective(params_for(scene, Fidelity(), base=base))
     return {
         c.name: "acts exactly as default (radial_terms auto resolves to the same)"
@@ -915,7 +906,7 @@ class _Bench:
         """accelerated-wear with the estimator told the scene's true wear factor."""
         truth = _truth(bag)
         factor = float(truth.wear_coefficient_factor[0])
-        scene = scene_from_mapping(bundled_scene_mapping(bag.name))
+        scene = load_scene(bag.name)
         params = params_for(scene, Fidelity(), base=self.base, wear_factor=factor)
         return _wear_run(
             bag.name, factor, factor, scored(replay(bag, params).states, truth, params)

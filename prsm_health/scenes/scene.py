@@ -199,18 +199,21 @@ def _bundled() -> Path:
     return Path(str(resources.files("prsm_health.scenes") / "data"))
 
 
-def bundled_scene_mapping(name: str) -> dict[str, Any]:
+def _bundled_mapping(name: str) -> dict[str, Any]:
     """The parsed YAML of the bundled scene ``name`` (a fresh dict to modify)."""
     return load_yaml_mapping(_bundled() / f"{name}.yaml")
 
 
-def varied_scene(base: str, name: str, description: str, **changes: Any) -> Scene:
-    """The bundled scene ``base`` renamed, described and changed by ``changes``: a section
-    given as a mapping is merged into the base's section key by key, unless its ``type``
-    differs (a sine profile in place of a downhole cycle), which replaces the section; any
-    other value replaces the key's (None: the format's default, e.g. no sensor faults)."""
-    mapping = _merged(bundled_scene_mapping(base), changes)
-    return scene_from_mapping(mapping | {"name": name, "description": description})
+def varied_scene(base: str, name: str, description: str | None = None, **changes: Any) -> Scene:
+    """The bundled scene ``base`` renamed, described (None: the base's description kept) and
+    changed by ``changes``: a section given as a mapping is merged into the base's section
+    key by key, unless its ``type`` differs (a sine profile in place of a downhole cycle),
+    which replaces the section; any other value replaces the key's (None: the format's
+    default, e.g. no sensor faults)."""
+    mapping = _merged(_bundled_mapping(base), changes) | {"name": name}
+    if description is not None:
+        mapping["description"] = description
+    return scene_from_mapping(mapping)
 
 
 def _merged(base: dict[str, Any], changes: dict[str, Any]) -> dict[str, Any]:
