@@ -6,6 +6,7 @@ from __future__ import annotations
 
 import json
 import shutil
+import time
 from pathlib import Path
 from typing import Any
 
@@ -13,6 +14,7 @@ import pytest
 from prsm_health_msgs.srv import ResetAfterMaintenance
 
 from prsm_health.outputs import JAMMED_ROLLERS
+from prsm_health.ros.node import RESET_SERVICE_QOS
 from test.ros.data import ORIGIN_S, synthetic_run, worn_params, write_bag
 from test.ros.harness import Listener, NodeProcess, play
 
@@ -185,16 +187,21 @@ def test_a_reset_whose_save_failed_is_saved_by_the_next_period(ros: None, tmp_pa
 @pytest.mark.timeout(120)
 def test_a_burst_of_resets_is_answered_every_one(ros: None, tmp_path: Path) -> None:
     """50 requests at once from one caller: with the services' default queue (KEEP_LAST 10)
-    the node answered 10 and the other callers waited for ever."""
+    the node answered 10 and the other callers waited for ever. The caller reads its answers
+    2 s later, so they wait in its client's queue, which must hold them too (with the
+    default, CI's caller lost the answers that came before it spun)."""
     listener = Listener("burst")
     try:
         with NodeProcess(
             tmp_path, "burst", hardware_id="burst", state_file=str(tmp_path / "state.json")
         ) as node:
             node.wait_log("configured")
-            client = listener.node.create_client(ResetAfterMaintenance, f"/burst/{SERVICE}")
+            client = listener.node.create_client(
+                ResetAfterMaintenance, f"/burst/{SERVICE}", qos_profile=RESET_SERVICE_QOS
+            )
             assert client.wait_for_service(timeout_sec=10.0)
             futures = [client.call_async(request(0, note=f"burst {i}")) for i in range(50)]
+            time.sleep(2.0)  # a caller busy elsewhere: every answer comes before it reads one
             listener.wait_for(
                 lambda: all(f.done() for f in futures), 30.0, "an answer to every request"
             )
