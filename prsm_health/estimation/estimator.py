@@ -336,11 +336,12 @@ class HealthEstimator:
         self._resumed = False
         if hole and not block.time_reset:
             self._bank.reinitialise_load(keep_load=True)
-        if self._reverses(block):
+        reverses = self._reverses(block)
+        if reverses:
             self._bank.reinitialise_load()
         if block.time_reset or hole:
             self._blind_until_s = block.stamp_s + REACQUIRE_S
-        transition = self._load_transition(block)
+        transition = self._load_transition(block, reverses=reverses)
         model = self.params.model
         step = self._bank.step(
             block,
@@ -409,15 +410,19 @@ class HealthEstimator:
             self._moving_direction, self._moving_s = block.direction, block.stamp_s
         return reverses
 
-    def _load_transition(self, block: Block) -> bool:
+    def _load_transition(self, block: Block, *, reverses: bool) -> bool:
         """Whether a stroke starts (the first ``model.load_transition_s`` of a direction of
         motion) or the actuator stands. The load model's jerk density is high there (the
         traction load builds up as the motion starts) and low in steady motion, where a load
         that follows the carrier-frequency ripple would otherwise hide a jammed roller. A time
-        reset starts a new time line, and its first ``model.load_transition_s`` too."""
+        reset starts a new time line, and its first ``model.load_transition_s`` too. A direction
+        that ``reverses`` the motion (:meth:`_reverses`) starts no transition: the load was
+        forgotten there and is found again from the torque, not built up; on a sine stroke the
+        transition took half of each 2 s half-cycle, where the healthy hypothesis' load followed
+        a jammed roller's ripple and the jam was lost (docs/estimation.md, "Reversals")."""
         if block.time_reset or block.direction != self._direction:
             self._direction = block.direction
-            self._direction_since_s = block.stamp_s
+            self._direction_since_s = -math.inf if reverses else block.stamp_s
         return (
             block.direction == 0
             or block.stamp_s - self._direction_since_s < self.params.model.load_transition_s

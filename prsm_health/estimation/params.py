@@ -93,7 +93,8 @@ class ModelParams:
     steady motion: the white-noise density of its jerk (a constant-acceleration model; a load
     that followed the carrier-frequency ripple would cost tens of nats a second).
     load_jerk_psd_transition_n2_per_s5: the same while a stroke starts (the first
-    load_transition_s of a direction of motion) and at standstill, where the traction load
+    load_transition_s of a direction of motion, unless it began with a reversal: there the
+    load is found again, it does not build up) and at standstill, where the traction load
     builds up: a smooth ramp of the downhole cycle, 45 kN in 0.5 s, costs a few nats, a step in
     one block thousands.
     ripple_prior_std: size of the carrier-frequency torque ripple a new jammed roller adds, per
