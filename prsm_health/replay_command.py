@@ -388,7 +388,7 @@ def _measured_in_motion(result: ReplayResult) -> str:
     elif (wrong := disagreement(ratio)) is not None:
         parts.append(f"WRONG INPUT: {wrong}")
     else:
-        parts.append(f"position per speed {ratio:.3f}")
+        parts.append(f"position per speed {ratio:.2f}")
     forward, reverse = result.measures.torque_along_motion_nm
     if (wrong := against_motion(forward, reverse)) is not None:
         parts.append(f"WRONG INPUT: {wrong}")
