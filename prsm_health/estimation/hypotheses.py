@@ -51,10 +51,21 @@ keeps every fresh one that lost fewer than ten nats and with it a second Gaussia
 most of the time, 30-45 % more time per sample; with the fresh floor where it was, the same
 jams are found sooner at a few per cent (docs/estimation.md, pruning).
 
+Why a load bound: with three or more of the downhole preset's ten rollers jammed the screw
+self-locks (its friction per newton exceeds the load arm), and an assisting load explains the
+torque of a smaller resisting one: a count one too high at an assisting load 5-6 times the
+true one. After a short stop (supports of 0.3-0.5 s instead of the scenes' 2 s) such a
+hypothesis, at 88-125 kN against a true 16-22 kN, outweighed the true count within seconds
+(a false jam, 29-36 % load RMSE; docs/performance.md, "Motion and loads beyond the downhole
+scenes"). Loads beyond ``model.plausible_load_factor`` times the preset's largest paper load
+do not occur, so a hypothesis whose load lies more than PLAUSIBLE_LOAD_SIGMAS standard
+deviations beyond that is dropped, as long as another lies within: an actuator that is
+really loaded beyond it keeps every hypothesis (and its diagnostics say it is overloaded).
+
 What filterpy's ``IMMEstimator`` does not do and this does: the fresh hypotheses above,
-pruning (jams never decrease, so a count that falls below its floor cannot come back except
-by a new birth), gating (a block that no hypothesis explains is not used), and numerical
-repair of the covariances (symmetrised, variance floors, positive definite).
+the load bound, pruning (jams never decrease, so a count that falls below its floor cannot
+come back except by a new birth), gating (a block that no hypothesis explains is not used),
+and numerical repair of the covariances (symmetrised, variance floors, positive definite).
 """
 
 from __future__ import annotations
@@ -109,6 +120,10 @@ MAX_ITERATIONS = 3
 #: noise changes by less than this fraction (_standstill_update).
 BAND_VARIANCE_TOLERANCE = 0.1
 
+
+#: A hypothesis whose load lies more than this many of its standard deviations beyond the
+#: plausible bound (model.plausible_load_factor) is dropped while another lies within it.
+PLAUSIBLE_LOAD_SIGMAS = 3.0
 
 #: Smallest variance kept on each state, relative to its initial variance.
 VARIANCE_FLOOR_RATIO = 1e-12
@@ -668,21 +683,32 @@ class JamHypotheses:
         return total
 
     def _drop_unlikely(self) -> None:
-        """Prune hypotheses below their probability floor (never the most likely one): a
-        fresh one below ``filter.min_hypothesis_probability``, an established one below
-        ``filter.min_established_probability`` (see the module docstring)."""
+        """Prune the hypotheses whose load is not plausible, while any is (see the module
+        docstring), and then those below their probability floor (never the most likely one):
+        a fresh one below ``filter.min_hypothesis_probability``, an established one below
+        ``filter.min_established_probability``."""
         settings = self._params.filter
         fresh_floor = math.log(max(settings.min_hypothesis_probability, 1e-300))
         established_floor = math.log(max(settings.min_established_probability, 1e-300))
-        best = max(self.hypotheses, key=lambda h: h.log_prob)
+        candidates = [h for h in self.hypotheses if self._plausible(h)] or self.hypotheses
+        best = max(candidates, key=lambda h: h.log_prob)
         kept = [
             h
-            for h in self.hypotheses
+            for h in candidates
             if h is best or h.log_prob >= (fresh_floor if h.fresh else established_floor)
         ]
         self._spare_filters += [h.filter for h in self.hypotheses if h not in kept]
         self.hypotheses = kept
         self._normalise()
+
+    def _plausible(self, h: Hypothesis) -> bool:
+        """Whether the load of ``h`` lies within PLAUSIBLE_LOAD_SIGMAS of its standard
+        deviation of the plausible bound (``model.plausible_load_factor``; always without)."""
+        bound = self._params.model.plausible_load_factor * self._params.load_scale_n
+        excess = abs(float(h.filter.x[LOAD])) - bound
+        return bound == 0.0 or excess <= PLAUSIBLE_LOAD_SIGMAS * math.sqrt(
+            float(h.filter.P[LOAD, LOAD])
+        )
 
     def restore(self, states: list[SavedHypothesis]) -> None:
         """Replace the hypotheses by saved ones."""

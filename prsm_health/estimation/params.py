@@ -114,6 +114,9 @@ class ModelParams:
     wear_coefficient_factor: the actuator's wear coefficient relative to the preset's, when
     calibrated (1 = the preset's). wear_coefficient_sigma_ln: log-normal spread of the true
     coefficient around that value (0.5 is the prior the scenes draw from).
+    plausible_load_factor: the axial load never exceeds this many times the preset's largest
+    paper load; a hypothesis whose load lies more than three standard deviations beyond it
+    is dropped while another lies within (0: no bound; hypotheses.PLAUSIBLE_LOAD_SIGMAS).
     """
 
     radial_load_ratio: float = 0.15
@@ -130,6 +133,7 @@ class ModelParams:
     initial_jammed_rollers: int = 0
     wear_coefficient_factor: float = 1.0
     wear_coefficient_sigma_ln: float = 0.5
+    plausible_load_factor: float = 1.5
 
     def __post_init__(self) -> None:
         require_ranges(
@@ -149,6 +153,7 @@ class ModelParams:
                 "jam_rate_per_h": (0.0, 1e6),
                 "wear_coefficient_factor": (1e-6, 1e6),
                 "wear_coefficient_sigma_ln": (0.0, 5.0),
+                "plausible_load_factor": (0.0, 1e3),
             },
         )
         require_integer(self.initial_jammed_rollers, "model.initial_jammed_rollers", 0)

@@ -317,6 +317,40 @@ def test_an_established_hypothesis_is_pruned_at_a_lower_floor_than_a_fresh_one()
     assert [(h.count, h.fresh) for h in bank.hypotheses] == [(0, False), (1, False)]
 
 
+@pytest.mark.parametrize("factor", [1.5, 0.0])
+def test_a_hypothesis_at_an_implausible_load_is_dropped_while_another_is_plausible(
+    factor: float,
+) -> None:
+    """A self-locked count at an assisting load far beyond model.plausible_load_factor times
+    the preset's largest load goes even as the most likely one; one within three standard
+    deviations of the bound stays; when no hypothesis is plausible all stay (an overloaded
+    actuator); with the factor 0 there is no bound."""
+    p = params(prune_hypotheses=True)
+    p = dataclasses.replace(p, model=dataclasses.replace(p.model, plausible_load_factor=factor))
+    bank = JamHypotheses(p, TorqueModel(p))
+    dim = bank.hypotheses[0].filter.dim_x
+    bound = 1.5 * p.load_scale_n
+
+    def hypothesis(count: int, load_n: float, std_n: float, log_prob: float) -> Hypothesis:
+        x, cov = np.zeros(dim), np.eye(dim)
+        x[0], cov[0, 0] = load_n, std_n**2
+        return Hypothesis(count, bank._new_filter(x, cov), log_prob, False)
+
+    implausible = hypothesis(3, -1.2 * bound, 1000.0, -0.1)
+    near = hypothesis(2, bound + 2900.0, 1000.0, -5.0)
+    plausible = hypothesis(2, 0.4 * bound, 1000.0, -2.0)
+    bank.hypotheses = [implausible, near, plausible]
+    bank._drop_unlikely()
+    expected = [implausible, near, plausible] if factor == 0.0 else [near, plausible]
+    assert [id(h) for h in bank.hypotheses] == [id(h) for h in expected]
+    bank.hypotheses = [
+        hypothesis(3, 2.0 * bound, 1000.0, -0.1),
+        hypothesis(4, 3.0 * bound, 1000.0, -2.5),
+    ]
+    bank._drop_unlikely()
+    assert [h.count for h in bank.hypotheses] == [3, 4]
+
+
 def test_without_evidence_the_counts_follow_the_jam_rate_and_all_jammed_keeps_its_share() -> None:
     """With no reweighting the counts are a Poisson process at model.jam_rate_per_h (module
     docstring, step 1): from certain N - 1 jammed rollers, N - 1 keeps exp(-rate t) and N,

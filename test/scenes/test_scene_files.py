@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import dataclasses
 import re
 from pathlib import Path
 
@@ -195,3 +196,8 @@ def test_the_envelope_scenes_build_with_their_own_names_and_descriptions() -> No
     other = {s.name: s.actuator.preset.name for s in scenes}
     assert other["sudden-jam-other-screw"] == "meng2022-misalignment"
     assert other["sudden-jam-650rpm"] == "dong2022-downhole"
+    by_name = {s.name: s for s in scenes}
+    short, bundled = by_name["sudden-jam-supports-0.3s"], load_scene("sudden-jam")
+    assert isinstance(short.profile, DownholeCycle) and isinstance(bundled.profile, DownholeCycle)
+    assert short.profile == dataclasses.replace(bundled.profile, support_s=0.3)
+    assert (short.jams, short.seed) == (bundled.jams, bundled.seed)
