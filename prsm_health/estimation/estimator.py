@@ -419,13 +419,18 @@ class HealthEstimator:
         that ``reverses`` the motion (:meth:`_reverses`) starts no transition: the load was
         forgotten there and is found again from the torque, not built up; on a sine stroke the
         transition took half of each 2 s half-cycle, where the healthy hypothesis' load followed
-        a jammed roller's ripple and the jam was lost (docs/estimation.md, "Reversals")."""
+        a jammed roller's ripple and the jam was lost (docs/estimation.md, "Reversals"). With
+        ``model.load_transition_acceleration_rad_s2`` set, a block whose drive accelerates or
+        decelerates faster than that is a transition too (a stroke ending: the load released)."""
         if block.time_reset or block.direction != self._direction:
             self._direction = block.direction
             self._direction_since_s = -math.inf if reverses else block.stamp_s
+        model = self.params.model
+        changing_speed = abs(block.motor_acceleration_rad_s2)
         return (
             block.direction == 0
-            or block.stamp_s - self._direction_since_s < self.params.model.load_transition_s
+            or block.stamp_s - self._direction_since_s < model.load_transition_s
+            or 0.0 < model.load_transition_acceleration_rad_s2 < changing_speed
         )
 
     def _after_hole(self, block: Block) -> bool:

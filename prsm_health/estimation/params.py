@@ -96,7 +96,10 @@ class ModelParams:
     load_transition_s of a direction of motion, unless it began with a reversal: there the
     load is found again, it does not build up) and at standstill, where the traction load
     builds up: a smooth ramp of the downhole cycle, 45 kN in 0.5 s, costs a few nats, a step in
-    one block thousands.
+    one block thousands. load_transition_acceleration_rad_s2: a block whose motor acceleration
+    exceeds this in magnitude (a stroke starting or ending) is on the transition density too
+    (0: off). For a load released faster than the scenes' 0.5 s, with the transition density
+    raised to match (docs/estimation.md, "A load released fast").
     ripple_prior_std: size of the carrier-frequency torque ripple a new jammed roller adds, per
     cosine and sine component, relative to the load torque at the ripple knee (measurement.py;
     0.3 for one roller with 6 kN radial load on dong2022-downhole); a first jam starts at
@@ -124,6 +127,7 @@ class ModelParams:
     load_jerk_psd_n2_per_s5: float = 5.0e11
     load_jerk_psd_transition_n2_per_s5: float = 5.0e12
     load_transition_s: float = 1.0
+    load_transition_acceleration_rad_s2: float = 0.0
     ripple_prior_std: float = 0.3
     ripple_random_walk_per_sqrt_s: float = 0.1
     ripple_phase_walk_per_sqrt_s: float = 0.01
@@ -145,6 +149,7 @@ class ModelParams:
                 "load_jerk_psd_n2_per_s5": (1e-3, 1e24),
                 "load_jerk_psd_transition_n2_per_s5": (1e-3, 1e24),
                 "load_transition_s": (0.0, 1e3),
+                "load_transition_acceleration_rad_s2": (0.0, 1e9),
                 "ripple_prior_std": (1e-9, 10.0),
                 "ripple_random_walk_per_sqrt_s": (1e-9, 10.0),
                 "ripple_phase_walk_per_sqrt_s": (1e-9, 10.0),

@@ -172,6 +172,12 @@ _ENVELOPE: tuple[_Entry, ...] = (
         "nominal-downhole, supports of 0.3 s",
         {"profile": _supports(0.3)},
     ),
+    (
+        "nominal-release-0.2s",
+        "nominal-downhole",
+        "nominal-downhole, the load released in 0.2 s at each stroke end (0.5 s)",
+        {"profile": {"type": "downhole_cycle", "load_ramp_s": 0.2}},
+    ),
     ("sudden-jam-100Hz", "sudden-jam", "sudden-jam sampled at 100 Hz", {"rate_hz": 100.0}),
     (
         "radial-misalignment-50Hz",
