@@ -426,11 +426,11 @@ class HealthEstimator:
             self._direction = block.direction
             self._direction_since_s = -math.inf if reverses else block.stamp_s
         model = self.params.model
-        changing_speed = abs(block.motor_acceleration_rad_s2)
+        acceleration = abs(block.motor_acceleration_rad_s2)
         return (
             block.direction == 0
             or block.stamp_s - self._direction_since_s < model.load_transition_s
-            or 0.0 < model.load_transition_acceleration_rad_s2 < changing_speed
+            or 0.0 < model.load_transition_acceleration_rad_s2 < acceleration
         )
 
     def _after_hole(self, block: Block) -> bool:

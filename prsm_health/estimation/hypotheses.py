@@ -261,6 +261,7 @@ class JamHypotheses:
         self._prune = params.fidelity.prune_hypotheses
         scale = params.load_scale_n
         self._large_update_n = LARGE_UPDATE_RATIO * scale
+        self._plausible_load_n = params.model.plausible_load_factor * scale  # 0: no bound
         initial = np.zeros(self._dim)
         initial[LOAD] = scale**2
         initial[LOAD_RATE] = scale**2  # the full load within a second
@@ -702,11 +703,10 @@ class JamHypotheses:
         self._normalise()
 
     def _plausible(self, h: Hypothesis) -> bool:
-        """Whether the load of ``h`` lies within PLAUSIBLE_LOAD_SIGMAS of its standard
-        deviation of the plausible bound (``model.plausible_load_factor``; always without)."""
-        bound = self._params.model.plausible_load_factor * self._params.load_scale_n
-        excess = abs(float(h.filter.x[LOAD])) - bound
-        return bound == 0.0 or excess <= PLAUSIBLE_LOAD_SIGMAS * math.sqrt(
+        """Whether the load of ``h`` lies less than PLAUSIBLE_LOAD_SIGMAS of its standard
+        deviations beyond the plausible bound (always when there is none)."""
+        excess = abs(float(h.filter.x[LOAD])) - self._plausible_load_n
+        return self._plausible_load_n == 0.0 or excess <= PLAUSIBLE_LOAD_SIGMAS * math.sqrt(
             float(h.filter.P[LOAD, LOAD])
         )
 

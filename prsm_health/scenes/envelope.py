@@ -49,9 +49,9 @@ _SINE_JAM = [{"time_s": 10.3, "roller": 3}]
 OTHER_SCREW = "meng2022-misalignment"
 
 
-def _supports(support_s: float) -> dict[str, Any]:
-    """The downhole cycle with supports of ``support_s`` (the bundled scenes' 2 s)."""
-    return {"type": "downhole_cycle", "support_s": support_s}
+def _cycle(**changes: float) -> dict[str, Any]:
+    """The bundled scene's downhole cycle with ``changes`` (merged by scene.varied_scene)."""
+    return {"type": "downhole_cycle"} | changes
 
 
 def _drive_train(*, gear_ratio: float, torque_constant_nm_per_a: float) -> dict[str, Any]:
@@ -152,31 +152,31 @@ _ENVELOPE: tuple[_Entry, ...] = (
         "sudden-jam-supports-0.3s",
         "sudden-jam",
         "sudden-jam, supports of 0.3 s between strokes (2 s)",
-        {"profile": _supports(0.3)},
+        {"profile": _cycle(support_s=0.3)},
     ),
     (
         "sudden-jam-supports-0.5s",
         "sudden-jam",
         "sudden-jam, supports of 0.5 s",
-        {"profile": _supports(0.5)},
+        {"profile": _cycle(support_s=0.5)},
     ),
     (
         "sudden-jam-supports-0.5s-seed-46",
         "sudden-jam",
         "sudden-jam, supports of 0.5 s, another draw of its loads, wall and noise (seed 46)",
-        {"profile": _supports(0.5), "seed": 46},
+        {"profile": _cycle(support_s=0.5), "seed": 46},
     ),
     (
         "nominal-supports-0.3s",
         "nominal-downhole",
         "nominal-downhole, supports of 0.3 s",
-        {"profile": _supports(0.3)},
+        {"profile": _cycle(support_s=0.3)},
     ),
     (
         "nominal-release-0.2s",
         "nominal-downhole",
         "nominal-downhole, the load released in 0.2 s at each stroke end (0.5 s)",
-        {"profile": {"type": "downhole_cycle", "load_ramp_s": 0.2}},
+        {"profile": _cycle(load_ramp_s=0.2)},
     ),
     ("sudden-jam-100Hz", "sudden-jam", "sudden-jam sampled at 100 Hz", {"rate_hz": 100.0}),
     (
