@@ -442,7 +442,12 @@ class ScoredRun:
     @property
     def rmse_percent_largest(self) -> float:
         """Load RMSE while moving, % of the largest paper load."""
-        return 100.0 * self.metrics.load_rmse_n / self.largest_load_n
+        return self.percent_largest(self.metrics)
+
+    def percent_largest(self, metrics: Metrics) -> float:
+        """The load RMSE while moving of ``metrics`` (of this run's scene), % of the largest
+        paper load."""
+        return 100.0 * metrics.load_rmse_n / self.largest_load_n
 
 
 @dataclass(frozen=True)
@@ -567,7 +572,7 @@ class EnvelopeRun(ScoredRun):
     @property
     def told_rmse_percent_largest(self) -> float | None:
         """Told the count: load RMSE while moving, % of the largest paper load."""
-        return None if self.told is None else 100.0 * self.told.load_rmse_n / self.largest_load_n
+        return None if self.told is None else self.percent_largest(self.told)
 
 
 @dataclass(frozen=True)

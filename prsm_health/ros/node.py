@@ -96,7 +96,7 @@ DIAGNOSTICS_QOS = QoSProfile(depth=10, reliability=QoSReliabilityPolicy.RELIABLE
 #: (KEEP_LAST 10) a burst of requests lost all but the last ten, whose callers never heard
 #: back (50 at once: 10 answered in 20 s; KEEP_ALL: 50 in 0.06 s).
 RESET_SERVICE_QOS = QoSProfile(
-    depth=10, history=QoSHistoryPolicy.KEEP_ALL, reliability=QoSReliabilityPolicy.RELIABLE
+    history=QoSHistoryPolicy.KEEP_ALL, reliability=QoSReliabilityPolicy.RELIABLE
 )
 #: How often a node whose configure failed says so on /diagnostics (steady clock: also
 #: while a sim-time /clock does not run) [s].
