@@ -426,11 +426,10 @@ class HealthEstimator:
             self._direction = block.direction
             self._direction_since_s = -math.inf if reverses else block.stamp_s
         model = self.params.model
-        acceleration = abs(block.motor_acceleration_rad_s2)
         return (
             block.direction == 0
             or block.stamp_s - self._direction_since_s < model.load_transition_s
-            or 0.0 < model.load_transition_acceleration_rad_s2 < acceleration
+            or model.releases_load(block.motor_acceleration_rad_s2)
         )
 
     def _after_hole(self, block: Block) -> bool:

@@ -137,8 +137,10 @@ class InputMeasures:
 class Block:
     """One filter measurement: the accepted samples of one time-grid cell, averaged.
 
-    stamp_s: mean stamp. duration_s: time since the previous block's mean stamp (the filter's
-    prediction step, across a gap too; the grid period for the first block of a time line).
+    stamp_s: mean stamp. stamp_var_s2: variance of the stamps about it (the block's load is a
+    mean over them: measurement.TorqueModel.predict). duration_s: time since the previous
+    block's mean stamp (the filter's prediction step, across a gap too; the grid period for
+    the first block of a time line).
     motor_torque_nm: k_t times the mean current. motor_speed_rad_s, motor_acceleration_rad_s2:
     mean speed, and the speed change over the block's span divided by that span (a block
     without a span, one sample: since the last sample before it on its time line);
@@ -181,6 +183,7 @@ class Block:
     time_reset: bool = False
     accepted_so_far: int = 0
     rejected_so_far: int = 0
+    stamp_var_s2: float = 0.0
 
 
 def merge_blocks(blocks: list[Block]) -> Block:
@@ -191,8 +194,9 @@ def merge_blocks(blocks: list[Block]) -> Block:
         return float(np.dot(weights, [getattr(b, name) for b in blocks]) / weights.sum())
 
     directions = {b.direction for b in blocks}
+    stamp = mean("stamp_s")
     return Block(
-        stamp_s=mean("stamp_s"),
+        stamp_s=stamp,
         duration_s=blocks[-1].stamp_s - blocks[0].stamp_s + blocks[0].duration_s,
         samples=int(weights.sum()),
         motor_torque_nm=mean("motor_torque_nm"),
@@ -214,6 +218,11 @@ def merge_blocks(blocks: list[Block]) -> Block:
         time_reset=blocks[0].time_reset,
         accepted_so_far=blocks[-1].accepted_so_far,
         rejected_so_far=blocks[-1].rejected_so_far,
+        # Each block's spread about the merged stamp: its own plus its mean's offset.
+        stamp_var_s2=float(
+            np.dot(weights, [b.stamp_var_s2 + (b.stamp_s - stamp) ** 2 for b in blocks])
+            / weights.sum()
+        ),
     )
 
 
@@ -664,6 +673,7 @@ class SampleBlocker:
                     time_reset=reset,
                     accepted_so_far=int(so_far[0][last[b]]),
                     rejected_so_far=int(so_far[1][last[b]]),
+                    stamp_var_s2=float(variance_t[b]),
                 )
             )
             self._last_block_stamp = float(stamps[b])

@@ -102,6 +102,7 @@ class TorqueModel:
         self._kink_n = KINK_FRACTION * params.load_scale_n
         self._wear_scale = actuator.wear_acceleration * params.model.wear_coefficient_factor
         self._actuator = actuator
+        self._model_params = params.model
         noise = params.noise
         self._torque_constant = drive.torque_constant_nm_per_a
         self._current_var = noise.current_std_a**2
@@ -125,7 +126,15 @@ class TorqueModel:
 
     def predict(self, x: FloatArray, block: Block, jammed: int) -> Prediction:
         """The measurement of ``block`` under ``jammed`` rollers at state ``x``."""
-        load = float(x[LOAD])
+        # The block's torque is a mean over its samples, and so is the load it carries: under
+        # the constant-acceleration load model, F + F'' var(t) / 2 about the mean stamp. Only
+        # where the load is released fast (the model's setting): elsewhere the load bends too
+        # little within a block for its uncertain F'' to pay (docs/estimation.md, "A load
+        # released fast").
+        curvature_weight = 0.0
+        if self._model_params.releases_load(block.motor_acceleration_rad_s2):
+            curvature_weight = 0.5 * block.stamp_var_s2
+        load = float(x[LOAD]) + curvature_weight * float(x[LOAD_ACCELERATION])
         direction = block.direction
         case = self._actuator.loading_case(block.motor_speed_rad_s)
         # Python floats: the arithmetic below is scalar, where numpy's scalars are slow.
@@ -170,6 +179,7 @@ class TorqueModel:
         ) / self._gear_ratio
         motor_torque = self._inertia * block.motor_acceleration_rad_s2 + gear * screw_torque
         jacobian[LOAD] = gear * d_screw_d_load
+        jacobian[LOAD_ACCELERATION] = jacobian[LOAD] * curvature_weight
         jacobian[RIPPLE_COS:] *= gear
         variance = (
             self._torque_constant**2

@@ -97,9 +97,10 @@ class ModelParams:
     load is found again, it does not build up) and at standstill, where the traction load
     builds up: a smooth ramp of the downhole cycle, 45 kN in 0.5 s, costs a few nats, a step in
     one block thousands. load_transition_acceleration_rad_s2: a block whose motor acceleration
-    exceeds this in magnitude (a stroke starting or ending) is on the transition density too
-    (0: off). For a load released faster than the scenes' 0.5 s, with the transition density
-    raised to match (docs/estimation.md, "A load released fast").
+    exceeds this in magnitude (a stroke starting or ending) is on the transition density too,
+    and is predicted at its mean load, which bends within such a block (0: off). For a load
+    released faster than the scenes' 0.5 s, with the transition density raised to match
+    (docs/estimation.md, "A load released fast").
     ripple_prior_std: size of the carrier-frequency torque ripple a new jammed roller adds, per
     cosine and sine component, relative to the load torque at the ripple knee (measurement.py;
     0.3 for one roller with 6 kN radial load on dong2022-downhole); a first jam starts at
@@ -138,6 +139,11 @@ class ModelParams:
     wear_coefficient_factor: float = 1.0
     wear_coefficient_sigma_ln: float = 0.5
     plausible_load_factor: float = 1.5
+
+    def releases_load(self, motor_acceleration_rad_s2: float) -> bool:
+        """Whether a block whose drive accelerates at this rate (either sign) is taken as a load
+        being released or built up (``load_transition_acceleration_rad_s2``; never when 0)."""
+        return 0.0 < self.load_transition_acceleration_rad_s2 < abs(motor_acceleration_rad_s2)
 
     def __post_init__(self) -> None:
         require_ranges(

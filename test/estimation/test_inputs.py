@@ -108,6 +108,21 @@ def test_blocks_average_the_samples_of_each_grid_cell() -> None:
     assert blocker.counters.accepted == len(samples)
 
 
+def test_a_block_holds_the_spread_of_its_stamps_and_a_merged_block_that_of_all() -> None:
+    """stamp_var_s2 is the variance of the block's stamps about its mean stamp (the block's
+    load is a mean over them, measurement.TorqueModel.predict). Merged standstill blocks hold
+    that of all their stamps about the merged stamp, not the mean of their own."""
+    samples = run(1.0)
+    blocks, _ = feed_in_chunks(samples, 100)
+    per_block = int(PARAMS.filter.block_duration_s * RATE_HZ)
+    stamps = samples.stamp_s
+    assert blocks[0].stamp_var_s2 == pytest.approx(np.var(stamps[:per_block]), rel=1e-9)
+    assert blocks[0].stamp_var_s2 == pytest.approx((per_block**2 - 1) / 12 / RATE_HZ**2, rel=1e-6)
+    merged = merge_blocks(blocks[:5])
+    assert merged.stamp_s == pytest.approx(stamps[: 5 * per_block].mean(), rel=1e-12)
+    assert merged.stamp_var_s2 == pytest.approx(np.var(stamps[: 5 * per_block]), rel=1e-9)
+
+
 def test_bad_values_are_rejected_and_counted_by_reason() -> None:
     samples = with_values(
         run(1.0),

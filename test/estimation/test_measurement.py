@@ -3,12 +3,14 @@ relations."""
 
 from __future__ import annotations
 
+import dataclasses
+
 import numpy as np
 import pytest
 
 from prsm_health.actuator import Actuator
 from prsm_health.estimation.inputs import Block
-from prsm_health.estimation.measurement import LOAD, Prediction, TorqueModel
+from prsm_health.estimation.measurement import LOAD, LOAD_ACCELERATION, Prediction, TorqueModel
 from prsm_health.estimation.params import EstimatorParams
 from prsm_health.physics.presets import load_preset
 
@@ -50,3 +52,47 @@ def test_the_degradation_slopes_are_the_derivatives_of_the_rates(jammed: int) ->
         difference = (getattr(above, rate) - getattr(below, rate)) / (2 * step)
         assert difference > 0.0
         np.testing.assert_allclose(getattr(prediction, slope), difference, rtol=1e-4)
+
+
+@pytest.mark.parametrize("jammed", [0, 1])
+def test_a_block_releasing_the_load_is_predicted_at_its_mean_load(jammed: int) -> None:
+    """The block's torque is a mean over its samples: under a load accelerating at F'' the
+    block carries F + F'' var(t) / 2 on average about its mean stamp, not F (a release of
+    45 kN in 0.2 s bends the load by 370 N within a 40 ms block). With
+    ``model.load_transition_acceleration_rad_s2`` set, a block decelerating faster is
+    predicted at load F and acceleration F'' as at load F + F'' var / 2 without acceleration,
+    and its Jacobian's acceleration entry is its load entry times var / 2. Without the
+    setting, or below it, the load's acceleration does not enter (docs/estimation.md, "A load
+    released fast")."""
+    released = dataclasses.replace(
+        PARAMS, model=dataclasses.replace(PARAMS.model, load_transition_acceleration_rad_s2=200.0)
+    )
+    model = TorqueModel(released)
+    variance, load, acceleration = 1.3e-4, 20_000.0, -5.0e6
+    decelerating = dataclasses.replace(
+        MOVING, stamp_var_s2=variance, motor_acceleration_rad_s2=-800.0
+    )
+    x = np.zeros(model.dim)
+    x[LOAD], x[LOAD_ACCELERATION] = load, acceleration
+    mean_load = load + 0.5 * variance * acceleration
+    assert mean_load == pytest.approx(19_675.0)
+    straight = x.copy()
+    straight[LOAD], straight[LOAD_ACCELERATION] = mean_load, 0.0
+    bent = model.predict(x, decelerating, jammed)
+    expected = model.predict(straight, decelerating, jammed)
+    assert bent.motor_torque_nm == pytest.approx(expected.motor_torque_nm, rel=1e-12)
+    assert bent.jacobian[LOAD] == pytest.approx(expected.jacobian[LOAD], rel=1e-12)
+    assert bent.jacobian[LOAD_ACCELERATION] == pytest.approx(
+        expected.jacobian[LOAD] * 0.5 * variance, rel=1e-12
+    )
+    flat = x.copy()
+    flat[LOAD_ACCELERATION] = 0.0
+    for unbent_model, block in (
+        (MODEL, decelerating),
+        (model, dataclasses.replace(decelerating, motor_acceleration_rad_s2=-150.0)),
+    ):
+        unbent = unbent_model.predict(x, block, jammed)
+        assert unbent.jacobian[LOAD_ACCELERATION] == 0.0
+        at_load_f = unbent_model.predict(flat, block, jammed)
+        assert unbent.motor_torque_nm == pytest.approx(at_load_f.motor_torque_nm, rel=1e-12)
+        assert unbent.motor_torque_nm != pytest.approx(bent.motor_torque_nm, rel=1e-3)
