@@ -57,7 +57,7 @@ from prsm_health.estimation.params import (
     load_params_mapping,
 )
 from prsm_health.replay import CHUNK_SAMPLES, replay
-from prsm_health.scenes.envelope import OTHER_SCREW, envelope_scenes
+from prsm_health.scenes.envelope import MODEL_SETTINGS, OTHER_SCREW, envelope_scenes
 from prsm_health.scenes.profiles import DownholeCycle
 from prsm_health.scenes.scene import (
     BUNDLED_BAGS,
@@ -258,8 +258,9 @@ class Plan:
     naive_seconds: the excerpt. repeats: runs of the default replay and of the decode
     baseline per bag (the best counts). wear_bag: the accelerated-wear bag for the run with
     the true wear factor (None: not run). wear_prior: its runs (default configuration).
-    envelope: scenes beyond the downhole ones (default configuration, told the count where
-    they have jams; reported apart from the floors).
+    envelope: scenes beyond the downhole ones (default configuration, with
+    scenes.envelope.MODEL_SETTINGS where named there; told the count where they have jams;
+    reported apart from the floors).
     params_file: the estimator parameters every run starts from (None: the bundled
     config/default.yaml); each scene's actuator replaces the file's (:func:`params_for`).
     """
@@ -561,6 +562,8 @@ class EnvelopeRun(ScoredRun):
 
     description: what differs from the downhole scenes. metrics: :func:`score` against the
     truth. told: the same run told the true count at each onset (None without jams).
+    model_settings: the ``model:`` settings it ran with over the benchmark's parameters
+    (scenes.envelope.MODEL_SETTINGS; empty: none).
     """
 
     scene: str
@@ -568,6 +571,7 @@ class EnvelopeRun(ScoredRun):
     metrics: Metrics
     largest_load_n: float
     told: Metrics | None
+    model_settings: dict[str, float] = field(default_factory=dict)
 
     @property
     def told_rmse_percent_largest(self) -> float | None:
@@ -917,25 +921,35 @@ class _Bench:
             bag.name, factor, factor, scored(replay(bag, params).states, truth, params)
         )
 
-    def _simulated(self, scene: Scene) -> tuple[SimulationChunk, EstimatorParams, Metrics]:
-        """``scene`` simulated in memory, the default configuration's parameters for it, and
-        its chunked estimates' scores."""
+    def _simulated(
+        self, scene: Scene, model_settings: dict[str, Any] | None = None
+    ) -> tuple[SimulationChunk, EstimatorParams, Metrics]:
+        """``scene`` simulated in memory, the default configuration's parameters for it (with
+        ``model_settings`` over their ``model:``), and its chunked estimates' scores."""
         result = simulate(scene)
         params = params_for(scene, Fidelity(), base=self.base)
+        if model_settings:
+            params = dataclasses.replace(
+                params, model=dataclasses.replace(params.model, **model_settings)
+            )
         states, _ = chunked(params, result.motor)
         return result, params, scored(states, result.truth, params)
 
     def envelope(self, scenes: Iterable[Scene]) -> list[EnvelopeRun]:
-        """The default configuration on each scene, and told the count where it has jams."""
+        """The default configuration on each scene (with its :data:`MODEL_SETTINGS`), and
+        told the count where it has jams."""
         found = []
         for scene in scenes:
             begin = time.perf_counter()
-            result, params, metrics = self._simulated(scene)
+            settings = MODEL_SETTINGS.get(scene.name, {})
+            result, params, metrics = self._simulated(scene, settings)
             told = None
             if len(result.truth.jam_onsets):
                 told = scored(told_count(params, result.motor, result.truth), result.truth, params)
             largest = params.actuator.preset.largest_axial_load_n
-            found.append(EnvelopeRun(scene.name, scene.description, metrics, largest, told))
+            found.append(
+                EnvelopeRun(scene.name, scene.description, metrics, largest, told, settings)
+            )
             self.progress(f"envelope {scene.name}: {time.perf_counter() - begin:.1f} s")
         return found
 
@@ -1048,7 +1062,12 @@ def run_benchmark(plan: Plan, *, progress: Callable[[str], None] = LOG.info) -> 
             "wear_prior_runs": len(plan.wear_prior),
             "wear_prior_seconds": plan.wear_prior[0].duration_s if plan.wear_prior else None,
             "envelope": [
-                {"name": s.name, "description": s.description, "seed": s.seed}
+                {
+                    "name": s.name,
+                    "description": s.description,
+                    "seed": s.seed,
+                    "model_settings": MODEL_SETTINGS.get(s.name, {}),
+                }
                 for s in plan.envelope
             ],
         },

@@ -424,6 +424,7 @@ def results_json(results: BenchResults, found: list[Floor]) -> dict[str, Any]:
                     "largest_load_n": r.largest_load_n,
                     "metrics": r.metrics.to_dict(),
                     "told_metrics": None if r.told is None else r.told.to_dict(),
+                    "model_settings": r.model_settings,
                 }
                 for r in results.envelope
             ],

@@ -17,7 +17,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from prsm_health import bench_command, benchmark_report
+from prsm_health import bench_command, benchmark, benchmark_report
 from prsm_health.benchmark import (
     CONFIGURATION_NAMES,
     CONFIGURATIONS,
@@ -55,6 +55,7 @@ from prsm_health.cli import main
 from prsm_health.estimation.params import EstimatorParams, ModelParams
 from prsm_health.physics.presets import load_preset
 from prsm_health.physics.roller_table import roller_values
+from prsm_health.scenes.envelope import MODEL_SETTINGS, envelope_scenes
 from prsm_health.scenes.recording import record
 from prsm_health.scenes.scene import Scene, load_scene, scene_from_mapping
 from prsm_health.scenes.simulator import Simulator, simulate
@@ -193,8 +194,39 @@ def test_envelope_runs_are_reported_apart_from_the_floors(
     assert entry["told_metrics"]["load_rmse_n"] == run.told.load_rmse_n
     assert entry["told_load_rmse_percent_largest"] == run.told_rmse_percent_largest
     assert document["plan"]["envelope"] == [
-        {"name": "tiny-envelope", "description": "a jam at 2.5 s", "seed": 5}
+        {"name": "tiny-envelope", "description": "a jam at 2.5 s", "seed": 5, "model_settings": {}}
     ]
+    assert entry["model_settings"] == {}
+
+
+def test_an_envelope_scene_named_with_settings_runs_with_them(
+    monkeypatch: pytest.MonkeyPatch, tmp_path: Path
+) -> None:
+    """A scene of scenes.envelope.MODEL_SETTINGS runs with its ``model:`` settings over the
+    benchmark's parameters, and the JSON says which. Here the jam rate set to 0 (the count
+    rises only when told): the jam the default finds at once (the envelope test above) is not
+    found, and told the count it is."""
+    settings = {"jam_rate_per_h": 0.0}
+    monkeypatch.setattr(benchmark, "MODEL_SETTINGS", {"tiny-envelope": settings})
+    jam = [{"time_s": 2.5, "roller": 3}]
+    scene = scene_from_mapping(downhole(name="tiny-envelope", duration_s=6.0, jams=jam))
+    plan = Plan("test", (), (), 300, (), 3.0, 1, None, (), envelope=(scene,))
+    results = run_benchmark(plan, progress=lambda _: None)
+    (run,) = results.envelope
+    assert run.model_settings == settings
+    assert [j.delay_s for j in run.metrics.jams] == [None]
+    assert run.told is not None and run.told.jams[0].delay_s is not None
+    write_results(results, tmp_path)
+    document = json.loads((tmp_path / "results.json").read_text())
+    assert document["envelope"][0]["model_settings"] == settings
+    assert document["plan"]["envelope"][0]["model_settings"] == settings
+
+
+def test_every_envelope_setting_names_an_envelope_scene_and_a_model_parameter() -> None:
+    names = {s.name for s in envelope_scenes()}
+    fields = {f.name for f in dataclasses.fields(ModelParams)}
+    assert MODEL_SETTINGS and set(MODEL_SETTINGS) <= names
+    assert all(set(settings) <= fields for settings in MODEL_SETTINGS.values())
 
 
 def test_told_the_count_the_load_is_right_where_the_count_is_not_identifiable() -> None:

@@ -4,8 +4,9 @@ Each is a bundled scene with one thing changed (:func:`~prsm_health.scenes.scene
 the speed, the traction or the wall's load, the drive train, the screw, the drive's sensors or
 sample rate, or the motion itself (a ramp, an assisting load, sine strokes that reverse
 without stopping). ``prsm-health bench
---scenes envelope`` runs them in the default configuration, told the count too where they have
-jams, and reports them apart from the floors, which are the downhole scenes'
+--scenes envelope`` runs them in the default configuration (those of :data:`MODEL_SETTINGS`
+with their settings), told the count too where they have jams, and reports them apart from
+the floors, which are the downhole scenes'
 (docs/performance.md, "Motion and loads beyond the downhole scenes").
 """
 
@@ -49,6 +50,20 @@ _SINE_JAM = [{"time_s": 10.3, "roller": 3}]
 OTHER_SCREW = "meng2022-misalignment"
 
 
+#: The estimator's settings for a load released faster than the scenes' 0.5 s (docs/
+#: estimation.md, "A load released fast"): off by default, so the envelope shows both.
+RELEASE_SETTINGS = {
+    "load_transition_acceleration_rad_s2": 200.0,
+    "load_jerk_psd_transition_n2_per_s5": 5.0e13,
+}
+#: The envelope's scenes that run with ``model:`` settings other than the bundled ones
+#: (scene name: settings; ``prsm-health bench`` applies them over its parameters).
+MODEL_SETTINGS: dict[str, dict[str, float]] = {
+    "nominal-release-0.2s-set": RELEASE_SETTINGS,
+    "sudden-jam-release-0.2s-set": RELEASE_SETTINGS,
+}
+
+
 def _cycle(**changes: float) -> dict[str, Any]:
     """The bundled scene's downhole cycle with ``changes`` (merged by scene.varied_scene)."""
     return {"type": "downhole_cycle"} | changes
@@ -60,6 +75,9 @@ def _drive_train(*, gear_ratio: float, torque_constant_nm_per_a: float) -> dict[
     drive = {"gear_ratio": gear_ratio, "torque_constant_nm_per_a": torque_constant_nm_per_a}
     return {"actuator": {"drive_train": drive | {"max_current_a": 60.0}}}
 
+
+#: The downhole cycle with its load released in 0.2 s at each stroke end (the scenes: 0.5 s).
+_FAST_RELEASE = _cycle(load_ramp_s=0.2)
 
 _Entry = tuple[str, str, str, dict[str, Any]]
 
@@ -176,7 +194,19 @@ _ENVELOPE: tuple[_Entry, ...] = (
         "nominal-release-0.2s",
         "nominal-downhole",
         "nominal-downhole, the load released in 0.2 s at each stroke end (0.5 s)",
-        {"profile": _cycle(load_ramp_s=0.2)},
+        {"profile": _FAST_RELEASE},
+    ),
+    (
+        "nominal-release-0.2s-set",
+        "nominal-downhole",
+        "nominal-release-0.2s, run with the release setting (200 rad/s², density 5e13)",
+        {"profile": _FAST_RELEASE},
+    ),
+    (
+        "sudden-jam-release-0.2s-set",
+        "sudden-jam",
+        "sudden-jam, the load released in 0.2 s, run with the release setting",
+        {"profile": _FAST_RELEASE},
     ),
     ("sudden-jam-100Hz", "sudden-jam", "sudden-jam sampled at 100 Hz", {"rate_hz": 100.0}),
     (
