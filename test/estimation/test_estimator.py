@@ -29,6 +29,7 @@ from prsm_health.estimation.inputs import Block, RejectReason
 from prsm_health.estimation.measurement import TorqueModel
 from prsm_health.estimation.metrics import Metrics, score
 from prsm_health.estimation.params import EstimatorParams, Fidelity, FilterParams, ModelParams
+from prsm_health.scenes.envelope import RELEASE_SETTINGS
 from prsm_health.scenes.scene import Scene, scene_from_mapping, varied_scene
 from prsm_health.scenes.simulator import SimulationChunk, simulate
 from prsm_health.signals import MotorSamples
@@ -234,12 +235,7 @@ def test_a_load_released_fast_at_a_stroke_end(set_for_it: bool) -> None:
     mean load (the load bends within them), its standard deviation is honest too (NEES 3-5
     without)."""
     document = downhole(profile=downhole()["profile"] | {"load_ramp_s": 0.2})
-    model = (
-        {"load_transition_acceleration_rad_s2": 200.0, "load_jerk_psd_transition_n2_per_s5": 5e13}
-        if set_for_it
-        else {}
-    )
-    _, metrics, _ = run(document, **model)
+    _, metrics, _ = run(document, **(RELEASE_SETTINGS if set_for_it else {}))
     assert (metrics.false_jam_declarations == 0) == set_for_it
     assert (metrics.load_rmse_percent_rated < 0.5) == set_for_it
     assert metrics.load_nees_consistent == set_for_it
