@@ -50,7 +50,7 @@ def add_bench_command(commands: Any) -> None:
         "--scenes",
         nargs="+",
         metavar="NAME",
-        help=f"scenes or groups ({', '.join(GROUPS)}) to run; default all",
+        help=f"scenes (the envelope's too) or groups ({', '.join(GROUPS)}) to run; default all",
     )
     parser.add_argument(
         "--configs",

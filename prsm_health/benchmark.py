@@ -369,7 +369,8 @@ def quick_plan(bags: Path = BUNDLED_BAGS) -> Plan:
 
 
 def select(plan: Plan, *, scenes: list[str] | None, configs: list[str] | None) -> Plan:
-    """The plan restricted to some scenes (names or GROUPS) and configurations (names).
+    """The plan restricted to some scenes (names, the envelope's too, or GROUPS) and
+    configurations (names).
 
     Raises:
         ValueError: an unknown scene, group or configuration name.
@@ -384,7 +385,7 @@ def select(plan: Plan, *, scenes: list[str] | None, configs: list[str] | None) -
         chosen_configs = tuple(c for c in CONFIGURATIONS if c.name in configs)
     if scenes is None:
         return dataclasses.replace(plan, configs=chosen_configs)
-    names = {s.name for s in plan.scenes} | set(GROUPS)
+    names = {s.name for s in plan.scenes} | {s.name for s in plan.envelope} | set(GROUPS)
     unknown = sorted(set(scenes) - names)
     if unknown:
         raise ValueError(
@@ -399,7 +400,7 @@ def select(plan: Plan, *, scenes: list[str] | None, configs: list[str] | None) -
         naive_scenes=tuple(n for n in plan.naive_scenes if n in wanted or "bags" in wanted),
         wear_bag=plan.wear_bag if wanted & {"accelerated-wear", "bags"} else None,
         wear_prior=plan.wear_prior if "wear-prior" in wanted else (),
-        envelope=plan.envelope if "envelope" in wanted else (),
+        envelope=tuple(s for s in plan.envelope if "envelope" in wanted or s.name in wanted),
     )
 
 

@@ -513,6 +513,9 @@ def test_selection_by_name_and_group_and_unknown_names() -> None:
     assert envelope.scenes == () and envelope.envelope == full.envelope
     names = [s.name for s in full.envelope]
     assert "sine-jam" in names and "two-jam-8-meng2022-misalignment" in names
+    one = select(full, scenes=["sine-jam", "two-jam-3"], configs=None)
+    assert [s.name for s in one.envelope] == ["sine-jam"]
+    assert [s.name for s in one.scenes] == ["two-jam-3"]
     with pytest.raises(ValueError, match="unknown nope"):
         select(plan, scenes=["nope"], configs=None)
     with pytest.raises(ValueError, match="unknown fast"):
