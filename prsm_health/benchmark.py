@@ -617,14 +617,16 @@ def params_for(
     *,
     base: EstimatorParams | None = None,
     wear_factor: float | None = None,
+    model_settings: dict[str, Any] | None = None,
 ) -> EstimatorParams:
     """``base`` (default: the bundled parameters) with the scene's actuator (as ``prsm-health
     replay`` takes a bundled scene's) and ``fidelity``; optionally a calibrated
-    wear-coefficient factor."""
+    wear-coefficient factor and other ``model:`` settings over the base's."""
     params = base if base is not None else base_params()
-    model = params.model
+    changes = dict(model_settings or {})
     if wear_factor is not None:
-        model = dataclasses.replace(model, wear_coefficient_factor=wear_factor)
+        changes["wear_coefficient_factor"] = wear_factor
+    model = dataclasses.replace(params.model, **changes)
     return dataclasses.replace(params, actuator=scene.actuator, fidelity=fidelity, model=model)
 
 
@@ -928,11 +930,7 @@ class _Bench:
         """``scene`` simulated in memory, the default configuration's parameters for it (with
         ``model_settings`` over their ``model:``), and its chunked estimates' scores."""
         result = simulate(scene)
-        params = params_for(scene, Fidelity(), base=self.base)
-        if model_settings:
-            params = dataclasses.replace(
-                params, model=dataclasses.replace(params.model, **model_settings)
-            )
+        params = params_for(scene, Fidelity(), base=self.base, model_settings=model_settings)
         states, _ = chunked(params, result.motor)
         return result, params, scored(states, result.truth, params)
 
