@@ -12,7 +12,8 @@ probability p = 1 - exp(-rate dt) per block, dt its duration but at most
    loads agree within ``filter.merge_distance_sigmas``, at most
    ``filter.components_per_count`` per count (see below); then from every established k a
    fresh hypothesis k + 1 is born: the state of k (the load does not change when a roller
-   seizes) plus the covariance of a new ripple of unknown phase (ripple_prior_std^2 on c and
+   seizes) plus the covariance of a new ripple of unknown phase (the ripple of
+   ``model.ripple_prior_radial_n``, measurement.TorqueModel.ripple_relative, squared on c and
    s), with probability times p;
 2. each filter predicts over dt and updates (filterpy ``ExtendedKalmanFilter`` or
    ``UnscentedKalmanFilter``; Joseph-form covariance update in the EKF). A fresh hypothesis
@@ -268,13 +269,20 @@ class JamHypotheses:
         initial[LOAD_ACCELERATION] = (10.0 * scale) ** 2  # ... or within a third of a second
         self._ripple = model.ripple
         self._ekf = params.fidelity.filter != "ukf"
+        ripple_prior_var = model.ripple_relative(params.model.ripple_prior_radial_n) ** 2
+        self._ripple_along_per_sqrt_s = model.ripple_relative(
+            params.model.ripple_walk_radial_n_per_sqrt_s
+        )
+        self._ripple_across_per_sqrt_s = model.ripple_relative(
+            params.model.ripple_phase_walk_radial_n_per_sqrt_s
+        )
         if self._ripple:
-            initial[RIPPLE] = params.model.ripple_prior_std**2
+            initial[RIPPLE] = ripple_prior_var
         self._initial_var = initial
         self._floor = initial * VARIANCE_FLOOR_RATIO
         self._jump_cov = np.zeros((self._dim, self._dim))
         if self._ripple:
-            self._jump_cov[RIPPLE, RIPPLE] = np.eye(2) * params.model.ripple_prior_std**2
+            self._jump_cov[RIPPLE, RIPPLE] = np.eye(2) * ripple_prior_var
         self._spare_filters: list[Filter] = []
         self._predicted: dict[tuple[bytes, int], Prediction] = {}
         self._process_cache: tuple[object, tuple[FloatArray, FloatArray]] = (
@@ -388,26 +396,24 @@ class JamHypotheses:
     def _ripple_noise(self, h: Hypothesis, load_noise: FloatArray, dt: float) -> FloatArray:
         """The process noise of a jammed hypothesis: the load's and its ripple's walk along the
         hypothesis' axis (:func:`ripple_walk`)."""
-        model = self._params.model
         noise = load_noise.copy()
         noise[RIPPLE, RIPPLE] = ripple_walk(
             h.ripple_axis,
             dt=dt,
-            along_per_sqrt_s=model.ripple_random_walk_per_sqrt_s,
-            across_per_sqrt_s=model.ripple_phase_walk_per_sqrt_s,
+            along_per_sqrt_s=self._ripple_along_per_sqrt_s,
+            across_per_sqrt_s=self._ripple_across_per_sqrt_s,
         )
         return noise
 
     def _polar_noise(self, noise: FloatArray, dt: float) -> FloatArray:
         """The process noise with the ripple's in polar coordinates: the amplitude walks at
-        ``model.ripple_random_walk_per_sqrt_s``, the phase at
+        ``model.ripple_walk_radial_n_per_sqrt_s``, the phase at
         ``model.ripple_phase_walk_rad_per_sqrt_s``."""
-        model = self._params.model
         polar = noise.copy()
         polar[RIPPLE, RIPPLE] = np.diag(
             [
-                model.ripple_random_walk_per_sqrt_s**2 * dt,
-                model.ripple_phase_walk_rad_per_sqrt_s**2 * dt,
+                self._ripple_along_per_sqrt_s**2 * dt,
+                self._params.model.ripple_phase_walk_rad_per_sqrt_s**2 * dt,
             ]
         )
         return polar

@@ -37,6 +37,7 @@ from prsm_health.estimation.surrogate import (
     AverageModel,
     DirectPhysics,
     averaged_tables,
+    jammed_ripple_nm_per_n,
 )
 from prsm_health.physics.friction import VISCOUS_SPEED_EXPONENT
 from prsm_health.physics.load_distribution import LoadingCase
@@ -99,6 +100,9 @@ class TorqueModel:
         self._gear_loss = (1.0 - drive.gear_efficiency) / drive.gear_efficiency
         self._inertia = drive.inertia_at_motor_kg_m2
         self._ripple_knee_n = RIPPLE_KNEE_FRACTION * params.load_scale_n
+        self._ripple_per_radial_n = jammed_ripple_nm_per_n(preset) / (
+            self._ripple_knee_n * self._load_arm_m
+        )
         self._kink_n = KINK_FRACTION * params.load_scale_n
         self._wear_scale = actuator.wear_acceleration * params.model.wear_coefficient_factor
         self._actuator = actuator
@@ -123,6 +127,13 @@ class TorqueModel:
             abs(load_n) * self._load_arm_m / root,
             math.copysign(self._load_arm_m, load_n) / root**3,
         )
+
+    def ripple_relative(self, radial_load_n: float) -> float:
+        """The size of the ripple phasor (c, s: relative to the load torque at the knee, S(F)
+        saturated) that ``radial_load_n`` of radial load makes with one jammed roller
+        (:func:`~prsm_health.estimation.surrogate.jammed_ripple_nm_per_n`): the parameters
+        give the ripple's prior and walks as radial loads."""
+        return self._ripple_per_radial_n * radial_load_n
 
     def predict(self, x: FloatArray, block: Block, jammed: int) -> Prediction:
         """The measurement of ``block`` under ``jammed`` rollers at state ``x``."""

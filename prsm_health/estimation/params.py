@@ -101,14 +101,16 @@ class ModelParams:
     and is predicted at its mean load, which bends within such a block (0: off). For a load
     released faster than the scenes' 0.5 s, with the transition density raised to match
     (docs/estimation.md, "A load released fast").
-    ripple_prior_std: size of the carrier-frequency torque ripple a new jammed roller adds, per
-    cosine and sine component, relative to the load torque at the ripple knee (measurement.py;
-    0.3 for one roller with 6 kN radial load on dong2022-downhole); a first jam starts at
-    twice its variance (docs/estimation.md, load model).
-    ripple_random_walk_per_sqrt_s: its drift as the radial load changes: along its phasor (the
-    amplitude follows the wall's radial load), and in every direction while its phase is not yet
-    known. ripple_phase_walk_per_sqrt_s: its drift across the phasor once the phase is known
-    (the phase is set by which rollers are jammed; hypotheses.ripple_walk).
+    ripple_prior_radial_n: size of the carrier-frequency torque ripple a new jammed roller adds,
+    per cosine and sine component, as the radial load that makes it (the physics core's
+    ripple per newton of radial load, surrogate.jammed_ripple_nm_per_n, scales it to the
+    screw: 4 kN is 0.30 of the load torque at the ripple knee on dong2022-downhole, 0.09 on
+    meng2022-misalignment); a first jam starts at twice its variance (docs/estimation.md,
+    load model). ripple_walk_radial_n_per_sqrt_s: its drift as the radial load changes,
+    likewise: along its phasor (the amplitude follows the wall's radial load), and in every
+    direction while its phase is not yet known. ripple_phase_walk_radial_n_per_sqrt_s: its
+    drift across the phasor once the phase is known (the phase is set by which rollers are
+    jammed; hypotheses.ripple_walk).
     ripple_phase_known_rad: the phase counts as known when its standard deviation is below
     this. ripple_phase_walk_rad_per_sqrt_s: the phase's drift while a stroke starts, where the
     ripple of a hypothesis whose phase is known is updated in polar coordinates
@@ -129,9 +131,9 @@ class ModelParams:
     load_jerk_psd_transition_n2_per_s5: float = 5.0e12
     load_transition_s: float = 1.0
     load_transition_acceleration_rad_s2: float = 0.0
-    ripple_prior_std: float = 0.3
-    ripple_random_walk_per_sqrt_s: float = 0.1
-    ripple_phase_walk_per_sqrt_s: float = 0.01
+    ripple_prior_radial_n: float = 4000.0
+    ripple_walk_radial_n_per_sqrt_s: float = 1300.0
+    ripple_phase_walk_radial_n_per_sqrt_s: float = 130.0
     ripple_phase_known_rad: float = 0.5
     ripple_phase_walk_rad_per_sqrt_s: float = 0.03
     jam_rate_per_h: float = 1e-3
@@ -156,9 +158,9 @@ class ModelParams:
                 "load_jerk_psd_transition_n2_per_s5": (1e-3, 1e24),
                 "load_transition_s": (0.0, 1e3),
                 "load_transition_acceleration_rad_s2": (0.0, 1e9),
-                "ripple_prior_std": (1e-9, 10.0),
-                "ripple_random_walk_per_sqrt_s": (1e-9, 10.0),
-                "ripple_phase_walk_per_sqrt_s": (1e-9, 10.0),
+                "ripple_prior_radial_n": (1e-3, 1e7),
+                "ripple_walk_radial_n_per_sqrt_s": (1e-3, 1e7),
+                "ripple_phase_walk_radial_n_per_sqrt_s": (1e-3, 1e7),
                 "ripple_phase_known_rad": (1e-6, math.pi),
                 "ripple_phase_walk_rad_per_sqrt_s": (1e-9, 10.0),
                 "jam_rate_per_h": (0.0, 1e6),

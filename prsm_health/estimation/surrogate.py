@@ -104,6 +104,36 @@ def physics_averages(
     )
 
 
+#: Carrier angles over a turn at which :func:`jammed_ripple_nm_per_n` resolves the ripple.
+RIPPLE_ANGLES = 36
+#: Radial load of that computation, as a fraction of the preset's largest axial load.
+RIPPLE_RADIAL_FRACTION = 0.1
+
+
+@cache
+def jammed_ripple_nm_per_n(preset: Preset) -> float:
+    """The carrier-frequency ripple of one jammed roller per newton of radial load [N m/N]:
+    the first carrier harmonic's amplitude of its sliding torque (002 eq. 15-16) on the
+    contact loads of the radially loaded screw (000 eq. 7-25), over RIPPLE_ANGLES carrier
+    angles at the preset's largest axial load and RIPPLE_RADIAL_FRACTION of it radial.
+
+    The physics core makes it proportional to the radial load whatever the axial load, the
+    same in both loading cases (0.530 N m per kN on dong2022-downhole, 0.371 on
+    meng2022-misalignment; up to a radial load of a quarter of the axial, 0.5 % more at two
+    thirds on li2020-jamming); a misalignment alone makes none, and with a radial load moves it
+    by up to 2 % at 2' of tilt, 13 % at 5' and small axial loads (docs/estimation.md, "The
+    ripple's size, from the physics").
+    """
+    theta = np.linspace(0.0, 2.0 * math.pi, RIPPLE_ANGLES, endpoint=False)
+    axial = np.full(RIPPLE_ANGLES, preset.largest_axial_load_n)
+    radial = RIPPLE_RADIAL_FRACTION * axial
+    torque = roller_values(
+        preset, axial, radial_load_n=radial, carrier_angle_rad=theta
+    ).jammed_torque_nm[:, 0]
+    harmonic = 2.0 * abs(complex(np.mean(torque * np.exp(-1j * theta))))
+    return harmonic / float(radial[0])
+
+
 #: Order of the quantities in the value vectors of :class:`AverageModel`.
 QUANTITIES = tuple(f.name for f in fields(RollerAverages))
 ROLLING, VISCOUS, SLIDING, WEAR_HEALTHY, WEAR_JAMMED, DAMAGE = range(len(QUANTITIES))

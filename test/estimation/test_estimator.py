@@ -29,7 +29,7 @@ from prsm_health.estimation.inputs import Block, RejectReason
 from prsm_health.estimation.measurement import TorqueModel
 from prsm_health.estimation.metrics import Metrics, score
 from prsm_health.estimation.params import EstimatorParams, Fidelity, FilterParams, ModelParams
-from prsm_health.scenes.envelope import RELEASE_SETTINGS
+from prsm_health.scenes.envelope import OTHER_SCREW, RELEASE_SETTINGS
 from prsm_health.scenes.scene import Scene, scene_from_mapping, varied_scene
 from prsm_health.scenes.simulator import SimulationChunk, simulate
 from prsm_health.signals import MotorSamples
@@ -307,12 +307,46 @@ def test_a_second_jam_that_turns_the_ripple_is_identified() -> None:
     second roller turns it, and count 2 becomes the most likely within a second. With the
     ripple free to turn (the phase walk as fast as the amplitude walk), count 1 follows with
     its ripple and load and the jam is never identified (docs/estimation.md)."""
-    walk = "ripple_phase_walk_per_sqrt_s"
+    walk = "ripple_phase_walk_radial_n_per_sqrt_s"
+    along = ModelParams().ripple_walk_radial_n_per_sqrt_s
     identified, missed = second_jam_delays(
-        two_jam_scenes(8)[7], walk, (getattr(ModelParams(), walk), 0.1)
+        two_jam_scenes(8)[7], walk, (getattr(ModelParams(), walk), along)
     )
     assert identified is not None and identified < 2.0
     assert missed is None
+
+
+def test_on_another_screw_the_ripple_prior_is_that_screws_and_finds_a_jam() -> None:
+    """two-jam-2 of the benchmark on meng2022-misalignment's screw, whose jammed roller makes
+    a ripple 3.2 times smaller against its load torque than dong2022-downhole's: with the
+    ripple's prior and walks scaled by the physics core to this screw, the first jam (at
+    standstill) is identified within the cycle; with them as large, relative to the load
+    torque, as on the downhole screw, it is never identified (docs/estimation.md, "The
+    ripple's size, from the physics")."""
+    scene = two_jam_scenes(2, preset=OTHER_SCREW)[1]
+    cycle_s = cycle_period_s(scene)
+    assert cycle_s is not None
+    result = simulate(scene)
+    params = params_for(scene, Fidelity())
+    downhole = params_for(two_jam_scenes(1)[0], Fidelity())
+    larger = TorqueModel(downhole).ripple_relative(1.0) / TorqueModel(params).ripple_relative(1.0)
+    assert 3.0 < larger < 3.5
+    model = params.model
+    as_on_downhole = dataclasses.replace(
+        model,
+        ripple_prior_radial_n=model.ripple_prior_radial_n * larger,
+        ripple_walk_radial_n_per_sqrt_s=model.ripple_walk_radial_n_per_sqrt_s * larger,
+        ripple_phase_walk_radial_n_per_sqrt_s=model.ripple_phase_walk_radial_n_per_sqrt_s * larger,
+    )
+    first_delays = []
+    for setting in (params, dataclasses.replace(params, model=as_on_downhole)):
+        states, _ = chunked(setting, result.motor)
+        metrics = scored(states, result.truth, setting)
+        assert metrics.false_jam_declarations == 0
+        first_delays.append(metrics.jams[0].delay_s)
+    scaled, unscaled = first_delays
+    assert scaled is not None and scaled < cycle_s
+    assert unscaled is None
 
 
 def test_a_second_jam_at_standstill_that_turns_the_ripple_is_identified() -> None:
@@ -840,9 +874,11 @@ def test_a_time_reset_is_said_and_a_divergence_with_it_is_not_lost(
     gated blocks before the reset counted after it. Now the divergence tests start again at
     the reset; a divergence on the reset's own block is said by the next estimate. (Without
     the load bound: with it the counts that run off beyond 82.5 kN are dropped, and the
-    filter is no longer gated on every block.)"""
+    filter is no longer gated on every block; and with the count held at the two told, no
+    jam rate: more jams would run off through every count, gated on some blocks only.)"""
     unbounded = dataclasses.replace(
-        DEFAULT, model=dataclasses.replace(DEFAULT.model, plausible_load_factor=0.0)
+        DEFAULT,
+        model=dataclasses.replace(DEFAULT.model, plausible_load_factor=0.0, jam_rate_per_h=0.0),
     )
 
     def estimates() -> tuple[list[HealthState], HealthEstimator]:

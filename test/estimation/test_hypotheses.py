@@ -36,6 +36,11 @@ def params(**fidelity: object) -> EstimatorParams:
     )
 
 
+def ripple_prior_var(p: EstimatorParams) -> float:
+    """A new jammed roller's ripple prior variance per component, relative (c, s units)."""
+    return TorqueModel(p).ripple_relative(p.model.ripple_prior_radial_n) ** 2
+
+
 def test_merging_equals_filterpy_imm_state_estimate_and_fresh_jams_are_born() -> None:
     """A count's established and fresh hypotheses merge by filterpy's IMM moment matching
     (IMMEstimator's combined x and P); each established count gives birth to count + 1."""
@@ -247,9 +252,7 @@ def test_a_maintenance_reset_makes_a_count_certain_and_keeps_the_load(prune: boo
         np.testing.assert_array_equal(h.filter.P[:RIPPLE_COS, :RIPPLE_COS], load_cov)
         np.testing.assert_array_equal(h.filter.x[RIPPLE_COS:], 0.0)
         np.testing.assert_array_equal(h.filter.P[:RIPPLE_COS, RIPPLE_COS:], 0.0)
-        np.testing.assert_array_equal(
-            np.diagonal(h.filter.P)[RIPPLE_COS:], p.model.ripple_prior_std**2
-        )
+        np.testing.assert_array_equal(np.diagonal(h.filter.P)[RIPPLE_COS:], ripple_prior_var(p))
 
 
 def test_safe_sqrt_repairs_a_matrix_that_lost_definiteness() -> None:
@@ -516,7 +519,7 @@ def test_a_phasor_of_unknown_phase_is_not_updated_in_polar_coordinates() -> None
         ripple_cov = bank.hypotheses[0].filter.P[RIPPLE, RIPPLE]
         largest_std = max(largest_std, math.sqrt(float(np.linalg.eigvalsh(ripple_cov).max())))
     c, s = bank.hypotheses[0].filter.x[RIPPLE]
-    assert largest_std < bank_params.model.ripple_prior_std
+    assert largest_std**2 < ripple_prior_var(bank_params)
     assert abs(math.degrees(math.atan2(s, c))) < 10.0
 
 
@@ -527,7 +530,7 @@ def test_a_new_jammed_roller_adds_the_ripple_prior_to_its_parents_ripple() -> No
     docs/estimation.md "Load model")."""
     p = EstimatorParams(actuator=Actuator(preset=PRESET), model=ModelParams(jam_rate_per_h=3600.0))
     bank = JamHypotheses(p, TorqueModel(p))
-    prior = p.model.ripple_prior_std**2
+    prior = ripple_prior_var(p)
     dim = bank.hypotheses[0].filter.dim_x
     one = np.eye(dim) * 4.0
     one[RIPPLE, RIPPLE] = [[0.5, 0.1], [0.1, 0.3]]
@@ -579,7 +582,7 @@ def test_an_assumed_onset_is_a_birth_that_keeps_the_ripple_learnt() -> None:
     x, cov = np.arange(1.0, dim + 1.0), np.eye(dim) * 2.0
     axis = np.array([0.6, 0.8])
     bank.hypotheses = [Hypothesis(1, bank._new_filter(x, cov), 0.0, ripple_axis=axis)]
-    prior = p.model.ripple_prior_std**2
+    prior = ripple_prior_var(p)
     bank.assume_onset(1)
     (same,) = bank.hypotheses
     assert same.count == 1 and same.ripple_axis is axis

@@ -11,12 +11,14 @@ from prsm_health.estimation.surrogate import (
     QUANTITIES,
     DirectPhysics,
     averaged_tables,
+    jammed_ripple_nm_per_n,
     physics_averages,
 )
 from prsm_health.physics.geometry import Misalignment
 from prsm_health.physics.load_distribution import LoadingCase
 from prsm_health.physics.model import OperatingPoint, evaluate
 from prsm_health.physics.presets import PRESET_NAMES, load_preset
+from prsm_health.physics.roller_table import roller_values
 
 #: Largest relative table error measured over 0.01-3x the largest load (1.4e-4 on
 #: dong2022-downhole, radial ratio 0.15), with margin for the other presets.
@@ -127,3 +129,29 @@ def test_a_jammed_roller_slides_with_many_times_the_rolling_torque() -> None:
     ratio = averages.sliding_nm / (averages.rolling_nm + averages.viscous_nm * 31.4**0.66)
     assert 40.0 < float(ratio[0]) < 120.0
     assert averages.wear_jammed_m[0] > averages.wear_healthy_m[0]
+
+
+@pytest.mark.parametrize("name", PRESET_NAMES)
+@pytest.mark.parametrize("case", list(LoadingCase))
+def test_the_jammed_ripple_per_radial_newton_holds_at_any_load(
+    name: str, case: LoadingCase
+) -> None:
+    """The ripple per newton of radial load, computed once at the preset's largest axial load,
+    is the first carrier harmonic of a jammed roller's sliding torque at other axial and
+    radial loads, in either loading case: the filter's ripple prior and walks, given as
+    radial loads, scale by it alone."""
+    preset = load_preset(name)
+    theta = np.linspace(0.0, 2.0 * math.pi, 8, endpoint=False)
+    per_newton = jammed_ripple_nm_per_n(preset)
+    for fraction, radial_ratio in ((0.05, 0.05), (0.2, 0.02), (0.4, 0.25)):
+        axial_n = fraction * preset.largest_axial_load_n
+        radial_n = radial_ratio * axial_n
+        torque = roller_values(
+            preset,
+            np.full(8, axial_n),
+            radial_load_n=np.full(8, radial_n),
+            carrier_angle_rad=theta,
+            case=case,
+        ).jammed_torque_nm[:, 0]
+        first = 2.0 * abs(complex(np.mean(torque * np.exp(-1j * theta))))
+        assert first == pytest.approx(per_newton * radial_n, rel=1e-5)
