@@ -5,6 +5,7 @@ recovers (real processes, the node's clock is the system clock here). The same n
 from __future__ import annotations
 
 import dataclasses
+import re
 import time
 from pathlib import Path
 from typing import Any
@@ -112,11 +113,16 @@ def test_stale_then_recovered(ros: None, tmp_path: Path) -> None:
         listener.close()
 
 
+#: The input health's words for stamps on another clock, and the rate they name.
+STAMP_RATE = r"stamps advance (\S+) s per second received \(a clock in the wrong unit\?\)"
+
+
 @pytest.mark.timeout(90)
 def test_stamps_on_another_clock_are_named(ros: None, tmp_path: Path) -> None:
     """Messages published at 1 kHz whose stamps advance 1 us each (a clock in the wrong unit):
     the input health warns, naming the stamps' rate against the node's clock (it read
-    "1000 Hz, 0 rejected" while no block completed)."""
+    "1000 Hz, 0 rejected" while no block completed). The rate named is 1e-3 as far as the
+    player keeps its pace (0.000995 with a busy machine: within 10 %)."""
     samples = synthetic_run(3.0)
     slow = dataclasses.replace(samples, stamp_s=ORIGIN_S + 1e-6 * np.arange(len(samples)))
     bag = tmp_path / "slow"
@@ -135,8 +141,8 @@ def test_stamps_on_another_clock_are_named(ros: None, tmp_path: Path) -> None:
                 for s in d["status"]
                 if s["name"] == INPUT_HEALTH and s["hardware_id"] == HARDWARE_ID
             ]
-            assert [m for m in messages if "stamps advance 0.001 s per second received" in m], (
-                messages
-            )
+            found = (re.search(STAMP_RATE, m) for m in messages)
+            named = [float(match.group(1)) for match in found if match]
+            assert named and all(abs(rate - 1e-3) < 1e-4 for rate in named), messages
     finally:
         listener.close()
