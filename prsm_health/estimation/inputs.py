@@ -190,8 +190,11 @@ def merge_blocks(blocks: list[Block]) -> Block:
     """One block standing for consecutive blocks (sample-weighted means; for standstill)."""
     weights = np.array([b.samples for b in blocks], dtype=np.float64)
 
+    def weighted(values: list[float]) -> float:
+        return float(np.dot(weights, values) / weights.sum())
+
     def mean(name: str) -> float:
-        return float(np.dot(weights, [getattr(b, name) for b in blocks]) / weights.sum())
+        return weighted([getattr(b, name) for b in blocks])
 
     directions = {b.direction for b in blocks}
     stamp = mean("stamp_s")
@@ -219,10 +222,7 @@ def merge_blocks(blocks: list[Block]) -> Block:
         accepted_so_far=blocks[-1].accepted_so_far,
         rejected_so_far=blocks[-1].rejected_so_far,
         # Each block's spread about the merged stamp: its own plus its mean's offset.
-        stamp_var_s2=float(
-            np.dot(weights, [b.stamp_var_s2 + (b.stamp_s - stamp) ** 2 for b in blocks])
-            / weights.sum()
-        ),
+        stamp_var_s2=weighted([b.stamp_var_s2 + (b.stamp_s - stamp) ** 2 for b in blocks]),
     )
 
 
