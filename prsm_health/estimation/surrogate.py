@@ -125,13 +125,13 @@ def jammed_ripple_nm_per_n(preset: Preset) -> float:
     ripple's size, from the physics").
     """
     theta = np.linspace(0.0, 2.0 * math.pi, RIPPLE_ANGLES, endpoint=False)
-    axial = np.full(RIPPLE_ANGLES, preset.largest_axial_load_n)
-    radial = RIPPLE_RADIAL_FRACTION * axial
+    axial_n = preset.largest_axial_load_n
+    radial_n = RIPPLE_RADIAL_FRACTION * axial_n
     torque = roller_values(
-        preset, axial, radial_load_n=radial, carrier_angle_rad=theta
+        preset, axial_n, radial_load_n=radial_n, carrier_angle_rad=theta
     ).jammed_torque_nm[:, 0]
     harmonic = 2.0 * abs(complex(np.mean(torque * np.exp(-1j * theta))))
-    return harmonic / float(radial[0])
+    return harmonic / radial_n
 
 
 #: Order of the quantities in the value vectors of :class:`AverageModel`.
