@@ -52,6 +52,14 @@ keeps every fresh one that lost fewer than ten nats and with it a second Gaussia
 most of the time, 30-45 % more time per sample; with the fresh floor where it was, the same
 jams are found sooner at a few per cent (docs/estimation.md, pruning).
 
+Why some jams are not born: a fresh hypothesis whose prior (its parent's probability times
+that of a jam) lies below the established floor is not born when pruning. To be kept it would
+have to gain more than ln(1e-9/1e-13) = 9.2 nats over the others in its one block. In steady
+motion most such births come from the count above the likeliest one, which the newborns keep
+at about 1e-9; their children start near 1e-17 and were dropped after their block. Not born,
+they cost nothing (sudden-jam's estimator 14 % faster). Born at the fresh floor instead, a
+held-out run lost a second jam (docs/estimation.md, pruning).
+
 Why a load bound: with three or more of the downhole preset's ten rollers jammed the screw
 self-locks (its friction per newton exceeds the load arm), and an assisting load explains the
 torque of a smaller resisting one: a count one too high at an assisting load 5-6 times the
@@ -260,6 +268,7 @@ class JamHypotheses:
         self.n_rollers = model.n_rollers
         self._rate_per_s = params.model.jam_rate_per_h / 3600.0
         self._prune = params.fidelity.prune_hypotheses
+        self._established_floor = math.log(max(params.filter.min_established_probability, 1e-300))
         scale = params.load_scale_n
         self._large_update_n = LARGE_UPDATE_RATIO * scale
         self._plausible_load_n = params.model.plausible_load_factor * scale  # 0: no bound
@@ -443,16 +452,20 @@ class JamHypotheses:
             for h in members:
                 h.log_prob += stay
             established += [self._moment_match(group) for group in self._groups(members)]
+        # Not born below the established floor when pruning (the module docstring), nor with
+        # probability zero (a ruled-out parent, or no jams at rate 0).
+        lowest = self._established_floor if self._prune else -math.inf
         fresh = [
             Hypothesis(
                 h.count + 1,
                 self._new_filter(h.filter.x, h.filter.P + self._jump_cov),
-                h.log_prob - (log_stay if h.count < self.n_rollers else 0.0) + log_jump,
+                h.log_prob - log_stay + log_jump,
                 fresh=True,
             )
             for h in established
-            # not born with probability zero (a ruled-out parent, or no jams at rate 0)
-            if h.count < self.n_rollers and math.isfinite(h.log_prob + log_jump)
+            if h.count < self.n_rollers
+            and math.isfinite(h.log_prob + log_jump)
+            and h.log_prob - log_stay + log_jump >= lowest
         ]
         self.hypotheses = established + fresh
 
@@ -694,9 +707,8 @@ class JamHypotheses:
         docstring), and then those below their probability floor (never the most likely one):
         a fresh one below ``filter.min_hypothesis_probability``, an established one below
         ``filter.min_established_probability``."""
-        settings = self._params.filter
-        fresh_floor = math.log(max(settings.min_hypothesis_probability, 1e-300))
-        established_floor = math.log(max(settings.min_established_probability, 1e-300))
+        fresh_floor = math.log(max(self._params.filter.min_hypothesis_probability, 1e-300))
+        established_floor = self._established_floor
         candidates = [h for h in self.hypotheses if self._plausible(h)] or self.hypotheses
         best = max(candidates, key=lambda h: h.log_prob)
         kept = [

@@ -320,6 +320,30 @@ def test_an_established_hypothesis_is_pruned_at_a_lower_floor_than_a_fresh_one()
     assert [(h.count, h.fresh) for h in bank.hypotheses] == [(0, False), (1, False)]
 
 
+@pytest.mark.parametrize("prune", [True, False])
+def test_no_jam_is_born_below_the_established_floor_when_pruning(prune: bool) -> None:
+    """A fresh hypothesis starts at its parent's probability times that of a jam in the
+    block; pruning gives no birth below the established floor (where a jam born there
+    would have to gain 9.2 nats in one block to reach the fresh floor), without pruning
+    every count gives birth."""
+    p = params(prune_hypotheses=prune)
+    bank = JamHypotheses(p, TorqueModel(p))
+    dim = bank.hypotheses[0].filter.dim_x
+    dt = 0.04
+    p_jump = -math.expm1(-p.model.jam_rate_per_h / 3600.0 * dt)
+    floor = p.filter.min_established_probability
+    above, below = 10.0 * floor / p_jump, 0.1 * floor / p_jump  # both parents kept
+    assert below >= floor
+    bank.hypotheses = [
+        Hypothesis(k, bank._new_filter(np.zeros(dim), np.eye(dim)), math.log(prob))
+        for k, prob in ((0, 1.0 - above - below), (1, above), (2, below))
+    ]
+    bank._merge(dt)
+    born = {h.count: math.exp(h.log_prob) for h in bank.hypotheses if h.fresh}
+    assert sorted(born) == ([1, 2] if prune else [1, 2, 3])
+    assert born[2] == pytest.approx(10.0 * floor, rel=1e-9)
+
+
 @pytest.mark.parametrize("factor", [1.5, 0.0])
 def test_a_hypothesis_at_an_implausible_load_is_dropped_while_another_is_plausible(
     factor: float,
