@@ -269,6 +269,7 @@ class JamHypotheses:
         self._rate_per_s = params.model.jam_rate_per_h / 3600.0
         self._prune = params.fidelity.prune_hypotheses
         self._established_floor = math.log(max(params.filter.min_established_probability, 1e-300))
+        self._fresh_floor = math.log(max(params.filter.min_hypothesis_probability, 1e-300))
         scale = params.load_scale_n
         self._large_update_n = LARGE_UPDATE_RATIO * scale
         self._plausible_load_n = params.model.plausible_load_factor * scale  # 0: no bound
@@ -455,17 +456,16 @@ class JamHypotheses:
         # Not born below the established floor when pruning (the module docstring), nor with
         # probability zero (a ruled-out parent, or no jams at rate 0).
         lowest = self._established_floor if self._prune else -math.inf
+        priors = [(h, h.log_prob - log_stay + log_jump) for h in established]
         fresh = [
             Hypothesis(
                 h.count + 1,
                 self._new_filter(h.filter.x, h.filter.P + self._jump_cov),
-                h.log_prob - log_stay + log_jump,
+                prior,
                 fresh=True,
             )
-            for h in established
-            if h.count < self.n_rollers
-            and math.isfinite(h.log_prob + log_jump)
-            and h.log_prob - log_stay + log_jump >= lowest
+            for h, prior in priors
+            if h.count < self.n_rollers and math.isfinite(prior) and prior >= lowest
         ]
         self.hypotheses = established + fresh
 
@@ -707,8 +707,7 @@ class JamHypotheses:
         docstring), and then those below their probability floor (never the most likely one):
         a fresh one below ``filter.min_hypothesis_probability``, an established one below
         ``filter.min_established_probability``."""
-        fresh_floor = math.log(max(self._params.filter.min_hypothesis_probability, 1e-300))
-        established_floor = self._established_floor
+        fresh_floor, established_floor = self._fresh_floor, self._established_floor
         candidates = [h for h in self.hypotheses if self._plausible(h)] or self.hypotheses
         best = max(candidates, key=lambda h: h.log_prob)
         kept = [
