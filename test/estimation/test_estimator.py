@@ -493,8 +493,9 @@ def test_stamps_in_milliseconds_read_as_seconds_add_no_wear_of_their_own(rate_hz
     """Every sample a gap of a second at 1 kHz, a hole of a quarter at 4 kHz: that much wear
     a sample, 500 to 1,000 times too much, saved for good by a node (found by two review
     sessions). The wear follows the motor's travel (its positions) where they say it turned
-    for less than half the stamps' time."""
-    scene = scene_from_mapping(downhole(jams=[], duration_s=12.0, rate_hz=rate_hz))
+    for less than half the stamps' time. Two seconds of a stroke: every sample read in
+    milliseconds is a block of its own (a run of 12 s took 30 s at 4 kHz)."""
+    scene = scene_from_mapping(downhole(jams=[], duration_s=2.0, rate_hz=rate_hz))
     motor = simulate(scene).motor
     params = EstimatorParams(actuator=scene.actuator)
     final_loss_m = []
