@@ -27,7 +27,7 @@ from collections.abc import Mapping
 from dataclasses import dataclass, field, replace
 from typing import Any
 
-from prsm_health.estimation.estimate import S_PER_H, UM_PER_M, HealthState
+from prsm_health.estimation.estimate import S_PER_H, UM_PER_M, EstimateEvent, HealthState
 from prsm_health.estimation.inputs import InputMeasures
 from prsm_health.estimation.motion_torque import against_motion
 from prsm_health.estimation.params import DiagnosticThresholds
@@ -293,7 +293,14 @@ def _jammed(fields: Mapping[str, Any], th: DiagnosticThresholds) -> _Part:
         level, message = Level.WARN, f"possible jammed roller (p = {p_jam:.2f})"
     else:
         level, message = Level.OK, f"no jammed roller (p(jam) = {p_jam:.2g})"
+    # At standstill the torque holds any load within the stiction band and carries no evidence
+    # of a jam (docs/estimation.md, "Measurement model"): the count can only be the one from
+    # before, whatever happens now. Say so rather than let "no jammed roller" read as seen.
+    standing = fields["event"] == EstimateEvent.STANDSTILL
+    if standing:
+        message += "; at standstill: a new jam cannot show until the screw moves"
     values = {"jam_probability_any": p_jam, "jam_warn_probability": th.jam_warn_probability}
+    values["jam_observable"] = 0 if standing else 1
     values.update({f"jam_probability_{k}": p for k, p in enumerate(probabilities)})
     return level, message, [("jammed_rollers_most_likely", str(count)), *_numbers(values)]
 

@@ -166,6 +166,20 @@ def test_jam_levels_and_message_names_the_count() -> None:
     assert level == Level.OK
 
 
+def test_at_standstill_the_jam_status_says_a_new_jam_cannot_show() -> None:
+    """A standing screw's torque carries no evidence of a jam: the status says so, at every
+    level, and ``jam_observable`` is 0; moving, neither."""
+    for probabilities in ((0.999, 0.001, 0.0), (0.7, 0.3, 0.0), (0.02, 0.98, 0.0)):
+        standing = statuses(state(jam_probabilities=probabilities, event=EstimateEvent.STANDSTILL))[
+            JAMMED_ROLLERS
+        ]
+        moving = statuses(state(jam_probabilities=probabilities))[JAMMED_ROLLERS]
+        assert standing[0] == moving[0]
+        note = "; at standstill: a new jam cannot show until the screw moves"
+        assert standing[1] == moving[1] + note
+        assert (standing[2]["jam_observable"], moving[2]["jam_observable"]) == ("0", "1")
+
+
 def test_precision_loss_and_fatigue_levels() -> None:
     th = DiagnosticThresholds(precision_loss_budget_um=10.0)
     level, _, values = statuses(state(precision_loss_m=8e-6), th=th)[PRECISION_LOSS]
