@@ -48,6 +48,9 @@ INPUT_HEALTH = "prsm_health: input health"
 FILTER_CONSISTENCY = "prsm_health: filter consistency"
 PERSISTENCE = "prsm_health: persistence"
 CONFIGURATION = "prsm_health: configuration"
+#: Appended to the jammed-rollers message at standstill, where the torque carries no evidence
+#: of a jam (docs/estimation.md, "Measurement model").
+STANDSTILL_JAM_NOTE = "; at standstill: a new jam cannot show until the screw moves"
 #: The diagnostics' hardware_id when none is given (the node's parameter, replay's option).
 DEFAULT_HARDWARE_ID = "prsm_actuator"
 #: What a hardware_id may be (it names the node's state file too).
@@ -298,9 +301,12 @@ def _jammed(fields: Mapping[str, Any], th: DiagnosticThresholds) -> _Part:
     # before, whatever happens now. Say so rather than let "no jammed roller" read as seen.
     standing = fields["event"] == EstimateEvent.STANDSTILL
     if standing:
-        message += "; at standstill: a new jam cannot show until the screw moves"
-    values = {"jam_probability_any": p_jam, "jam_warn_probability": th.jam_warn_probability}
-    values["jam_observable"] = 0 if standing else 1
+        message += STANDSTILL_JAM_NOTE
+    values = {
+        "jam_probability_any": p_jam,
+        "jam_warn_probability": th.jam_warn_probability,
+        "jam_observable": 0 if standing else 1,
+    }
     values.update({f"jam_probability_{k}": p for k, p in enumerate(probabilities)})
     return level, message, [("jammed_rollers_most_likely", str(count)), *_numbers(values)]
 

@@ -20,6 +20,7 @@ from prsm_health.outputs import (
     JAMMED_ROLLERS,
     PERSISTENCE,
     PRECISION_LOSS,
+    STANDSTILL_JAM_NOTE,
     STATUS_NAMES,
     FilterEvents,
     InputHealth,
@@ -175,8 +176,7 @@ def test_at_standstill_the_jam_status_says_a_new_jam_cannot_show() -> None:
         ]
         moving = statuses(state(jam_probabilities=probabilities))[JAMMED_ROLLERS]
         assert standing[0] == moving[0]
-        note = "; at standstill: a new jam cannot show until the screw moves"
-        assert standing[1] == moving[1] + note
+        assert standing[1] == moving[1] + STANDSTILL_JAM_NOTE
         assert (standing[2]["jam_observable"], moving[2]["jam_observable"]) == ("0", "1")
 
 

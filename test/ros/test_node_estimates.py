@@ -23,7 +23,12 @@ import pytest
 from prsm_health.bags.reader import read_motor_samples
 from prsm_health.estimation.estimator import HealthEstimator
 from prsm_health.estimation.params import bundled_params_file
-from prsm_health.outputs import JAMMED_ROLLERS, STATUS_NAMES, health_estimate_fields
+from prsm_health.outputs import (
+    JAMMED_ROLLERS,
+    STANDSTILL_JAM_NOTE,
+    STATUS_NAMES,
+    health_estimate_fields,
+)
 from prsm_health.ros.parameters import PARAMETERS as SPECS
 from prsm_health.ros.parameters import node_config
 from test.ros.data import short_jam_scene, simulated_bag
@@ -161,7 +166,7 @@ def test_jam_appears_in_the_diagnostics(run: Run) -> None:
     assert {s["level"] for s in after} == {"ERROR"}
     # The scene stands still at its end: the status then says a new jam could not show.
     standing = after[-1]["values"]["jam_observable"] == "0"
-    note = "; at standstill: a new jam cannot show until the screw moves" if standing else ""
+    note = STANDSTILL_JAM_NOTE if standing else ""
     count = r"1 jammed roller \(p = (0\.9\d|1\.00)\)"
     assert re.fullmatch(count + re.escape(note), after[-1]["message"])
     assert after[-1]["values"]["jammed_rollers_most_likely"] == "1"
