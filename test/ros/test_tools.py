@@ -457,7 +457,11 @@ def _play_into_a_stopped_node(tmp_path: Path, seconds: float, rate: str) -> tupl
 
     try:
         with NodeProcess(
-            tmp_path, hardware_id=HARDWARE_ID, input_qos="reliable", diagnostics_rate_hz=20.0
+            tmp_path,
+            hardware_id=HARDWARE_ID,
+            input_qos="reliable",
+            diagnostics_rate_hz=20.0,
+            state_file=str(tmp_path / "state.json"),
         ) as node:
             graph.wait_for(lambda: bool(graph.statuses(HARDWARE_ID)), 30.0, "the node")
             player = start_player(bag, "--rate", rate)
