@@ -12,7 +12,8 @@ MSGS := msg_defs/prsm_health_msgs
 # Limit for the whole pytest run, in seconds (per-test limits: pytest-timeout, pyproject.toml).
 TEST_RUN_TIMEOUT ?= 840
 
-# DDS hard rules, not overridable: loopback only, no shared-memory transport. ROS logs go to
+# DDS hard rules, not overridable: loopback discovery, UDPv4 as Fast DDS's built-in transports
+# (rmw_fastrtps still adds shared memory under LOCALHOST: docs/ros.md). ROS logs go to
 # the build tree unless ROS_LOG_DIR is set (the environment's or the command line's wins).
 # ROS_DOMAIN_ID is chosen per test process by test/conftest.py, and by the demo target below.
 export ROS_AUTOMATIC_DISCOVERY_RANGE := LOCALHOST

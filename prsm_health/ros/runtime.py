@@ -69,9 +69,10 @@ def message_class(type_name: str) -> Any:
 
 
 def loopback_env(base: Mapping[str, str], domain_id: int) -> dict[str, str]:
-    """``base`` with the DDS rules of this project: discovery on localhost only, UDPv4 (no
-    shared memory), logs in ``ROS_LOG_DIR`` (``build/ros_log`` by default), and a domain id
-    (``ROS_DOMAIN_ID`` if ``base`` has one, else ``domain_id``)."""
+    """``base`` with the DDS rules of this project: discovery on localhost only, Fast DDS's
+    built-in transports set to UDPv4 (which the localhost range overrides: docs/ros.md), logs
+    in ``ROS_LOG_DIR`` (``build/ros_log`` by default), and a domain id (``ROS_DOMAIN_ID`` if
+    ``base`` has one, else ``domain_id``)."""
     env = dict(base)
     env["ROS_AUTOMATIC_DISCOVERY_RANGE"] = "LOCALHOST"
     env["FASTDDS_BUILTIN_TRANSPORTS"] = "UDPv4"

@@ -2,8 +2,9 @@
 
 The node runs in its own process (``python -m prsm_health.ros.node``), the player in another
 (``python -m prsm_health play``); both inherit the DDS environment of test/conftest.py
-(loopback, UDPv4, this test process's ROS_DOMAIN_ID). The :class:`Listener` lives in the test
-process (rclpy is initialised by the ``ros`` fixture) and records what the node publishes.
+(localhost discovery, UDPv4 built-in transports, this test process's ROS_DOMAIN_ID). The
+:class:`Listener` lives in the test process (rclpy is initialised by the ``ros`` fixture) and
+records what the node publishes.
 Every wait has a deadline; every child is stopped with SIGINT, then SIGKILL.
 """
 
