@@ -45,6 +45,8 @@ _ASSIST = {
 _RAMP_JAMS = [{"time_s": 12.0, "roller": 3}, {"time_s": 22.0, "roller": 7}]
 _ASSIST_JAM = [{"time_s": 8.0, "roller": 3}]
 _SINE_JAM = [{"time_s": 10.3, "roller": 3}]
+#: The sine strokes with a load that keeps its sign through the reversals (as gravity).
+_GRAVITY = {"axial_load_n": 10000.0, "resisting": False}
 #: The screw of papers 001/004: a larger lead, so a jammed roller is a smaller share of the
 #: torque (docs/estimation.md, "Another screw").
 OTHER_SCREW = "meng2022-misalignment"
@@ -220,6 +222,14 @@ _ENVELOPE: tuple[_Entry, ...] = (
         "nominal-downhole",
         "sine strokes, 300 rpm, a period of 4 s, 20 kN resisting, 40 s, a jam at 10.3 s",
         {"profile": SINE_PROFILE, "duration_s": 40.0, "seed": 12},
+        _SINE_JAM,
+    ),
+    *_with_and_without_jams(
+        ("sine-gravity-jam", "sine-gravity"),
+        "nominal-downhole",
+        "sine strokes, 10 kN that keeps its sign (gravity-like: resisting forward, driving"
+        " reverse), 40 s, a jam at 10.3 s",
+        {"profile": SINE_PROFILE | _GRAVITY, "duration_s": 40.0, "seed": 12},
         _SINE_JAM,
     ),
     (

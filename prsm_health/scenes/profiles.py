@@ -37,7 +37,7 @@ from numpy.typing import NDArray
 
 from prsm_health.physics.errors import ParameterError
 from prsm_health.scenes.noise import Stream, scene_generator
-from prsm_health.scenes.validation import level_or_range, number, section
+from prsm_health.scenes.validation import flag, level_or_range, number, section
 
 FloatArray = NDArray[np.float64]
 DirectionArray = NDArray[np.int8]
@@ -257,24 +257,30 @@ class RampProfile:
 
 @dataclass(frozen=True, kw_only=True)
 class SineProfile:
-    """Sinusoidal screw speed; an axial load of ``axial_load_n`` resisting the reference speed."""
+    """Sinusoidal screw speed; an axial load of ``axial_load_n`` resisting the reference speed
+    (it changes sign at each reversal, as the friction of a body dragged along a wall), or
+    with ``resisting`` false the same load all the time (as gravity on a vertical axis: it
+    resists the forward strokes and drives the reverse ones)."""
 
     speed_amplitude_rpm: float = 300.0
     speed_offset_rpm: float = 0.0
     period_s: float = 4.0
     axial_load_n: float = 20_000.0
+    resisting: bool = True
 
     def __post_init__(self) -> None:
         number(self, "speed_amplitude_rpm", low=0.0)
         number(self, "speed_offset_rpm")
         number(self, "period_s", low=0.0, open_low=True)
         number(self, "axial_load_n", low=0.0)
+        flag(self, "resisting")
 
     def reference(self, time_s: FloatArray) -> Reference:
         phase = 2.0 * math.pi * time_s / self.period_s
         speed = (self.speed_offset_rpm + self.speed_amplitude_rpm * np.sin(phase)) * RPM_TO_RAD_S
         direction = _direction(speed)
-        load = np.asarray(direction * self.axial_load_n, dtype=np.float64)
+        sign = direction if self.resisting else 1
+        load = np.asarray(sign * self.axial_load_n, dtype=np.float64)
         return Reference(speed, load, direction)
 
 

@@ -10,11 +10,18 @@ import numpy as np
 import pytest
 
 from prsm_health.actuator import load_torque_nm
+from prsm_health.physics.errors import ParameterError
 from prsm_health.physics.geometry import Misalignment
 from prsm_health.physics.load_distribution import LoadingCase
 from prsm_health.physics.model import OperatingPoint, evaluate
 from prsm_health.physics.roller_table import roller_values
-from prsm_health.scenes.profiles import ConstantProfile, ConstantRadial, DownholeCycle
+from prsm_health.scenes.profiles import (
+    ConstantProfile,
+    ConstantRadial,
+    DownholeCycle,
+    SineProfile,
+    profile_from_mapping,
+)
 from prsm_health.scenes.scene import Jam, Scene, load_scene, scene_from_mapping
 from prsm_health.scenes.sensors import Sensors
 from prsm_health.scenes.simulator import SimulationChunk, Simulator, simulate
@@ -274,6 +281,21 @@ def test_speed_loop_reaches_rest_and_the_reference_speed() -> None:
     assert isinstance(scene.profile, DownholeCycle)
     rpm = np.abs(truth.screw_speed_rad_s).max() * 30.0 / math.pi
     assert 250.0 <= rpm <= 450.0
+
+
+def test_a_sine_load_resists_the_motion_or_keeps_its_sign() -> None:
+    """By default the sine stroke's load changes sign with the reference speed (it resists
+    the motion); with ``resisting: false`` it is the same load throughout, as gravity: it
+    resists the forward strokes and drives the reverse ones. Anything but a bool is refused."""
+    time_s = np.linspace(0.0, 8.0, 801)
+    resisting = SineProfile(axial_load_n=10_000.0).reference(time_s)
+    constant = SineProfile(axial_load_n=10_000.0, resisting=False).reference(time_s)
+    assert set(resisting.direction.tolist()) == {-1, 1}
+    np.testing.assert_array_equal(resisting.axial_load_n, 10_000.0 * resisting.direction)
+    np.testing.assert_array_equal(constant.axial_load_n, np.full(time_s.shape, 10_000.0))
+    np.testing.assert_array_equal(constant.speed_rad_s, resisting.speed_rad_s)
+    with pytest.raises(ParameterError, match=r"resisting: must be true or false, got 'no'"):
+        profile_from_mapping({"type": "sine", "resisting": "no"})
 
 
 def test_constant_profile_starts_steady() -> None:
