@@ -11,15 +11,19 @@ import pytest
 REPO = Path(__file__).resolve().parents[1]
 
 
-def _domain_id() -> int:
-    """A ROS domain in 1..101 of our own: per xdist worker, else per process."""
+def _set_domain_id() -> None:
+    """A ROS domain in 1..101 of our own: per process, unless ROS_DOMAIN_ID is set; per worker
+    under pytest-xdist (``-n``), whatever is set. A worker inherits the environment of the
+    controlling process, to which this module has already given its domain: kept, it put
+    both workers in one (measured on 2026-11-29: both read 50)."""
     worker = os.environ.get("PYTEST_XDIST_WORKER", "")
     if worker.startswith("gw"):
-        return 1 + (os.getppid() + int(worker[2:])) % 101
-    return 1 + os.getpid() % 101
+        os.environ["ROS_DOMAIN_ID"] = str(1 + (os.getppid() + int(worker[2:])) % 101)
+    else:
+        os.environ.setdefault("ROS_DOMAIN_ID", str(1 + os.getpid() % 101))
 
 
-os.environ.setdefault("ROS_DOMAIN_ID", str(_domain_id()))
+_set_domain_id()
 os.environ["ROS_AUTOMATIC_DISCOVERY_RANGE"] = "LOCALHOST"
 os.environ["FASTDDS_BUILTIN_TRANSPORTS"] = "UDPv4"
 os.environ.setdefault("ROS_LOG_DIR", str(REPO / "build" / "ros_log"))
