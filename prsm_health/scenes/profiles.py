@@ -279,7 +279,7 @@ class SineProfile:
         phase = 2.0 * math.pi * time_s / self.period_s
         speed = (self.speed_offset_rpm + self.speed_amplitude_rpm * np.sin(phase)) * RPM_TO_RAD_S
         direction = _direction(speed)
-        sign = direction if self.resisting else 1
+        sign = direction if self.resisting else np.ones_like(direction)
         load = np.asarray(sign * self.axial_load_n, dtype=np.float64)
         return Reference(speed, load, direction)
 

@@ -406,9 +406,9 @@ def test_play_faster_than_a_reliable_node_loses_nothing(ros: None, tmp_path: Pat
     roller of two, and the play, which waits only for what its history still holds, exited 0.
     With keep-all, Fast DDS holds 5,000 unacknowledged messages; a write beyond blocks 100 ms
     and fails, which ended the play with an RCLError (in CI, a node 100 ms behind under load)
-    until the player wrote it again. 15,000 is more than the 2,000 received before the stop
-    and either of those depths after it: such a history would lose messages here, and
-    keep-all must block the play. (40,000 until 2026-11-29: 35 s of the suite's 554.)"""
+    until the player wrote it again. 15,000 exceeds the 2,000 received before the stop plus
+    either depth (10,000 kept last, 5,000 held unacknowledged): such a history would lose
+    messages here, and keep-all must hold the play back. (40,000 until 2026-11-29: 35 s.)"""
     count = 15_000
     bag = write_bag(tmp_path / "bag", synthetic_run(count / 1000.0, from_rest=False, seed=5))
     listener = Listener("fast")
