@@ -3,7 +3,7 @@
 Every sample is checked and either accepted or rejected with a reason that is counted (never
 silently dropped): non-finite values, values out of the drive's range or a stamp beyond
 LARGEST_STAMP_S, a time stamp not after the last accepted one, an isolated spike in the
-current, or a current stuck at one value.
+current or the speed, or a current stuck at one value.
 Accepted samples are grouped into blocks of ``filter.block_duration_s`` on a fixed time grid;
 each block becomes one filter measurement (:class:`Block`). Everything is vectorised over the
 samples of a chunk; only chunks with time going backwards take a per-sample path.
@@ -44,7 +44,8 @@ from prsm_health.signals import BoolArray, FloatArray, IntArray, MotorSamples
 Counts = IntArray | int
 
 #: A current sample this many noise standard deviations away from both neighbours, which
-#: agree with each other, is a spike.
+#: agree with each other, is a spike; a speed sample is one this many beyond what the motor
+#: can accelerate in the time between (SampleBlocker._speed_spikes).
 SPIKE_SIGMAS = 12.0
 #: Two consecutive motor positions within this [rad] of zero that differ by more than half a
 #: turn show that the positions wrap into one turn: from then on no travel is taken from them.
@@ -250,6 +251,8 @@ class SampleBlocker:
             LARGEST_POSITION_RAD,
         )
         self._spike_a = SPIKE_SIGMAS * params.noise.current_std_a
+        self._spike_rad_s = SPIKE_SIGMAS * params.noise.speed_std_rad_s
+        self._max_acceleration = params.max_motor_acceleration_rad_s2
         #: The most samples a block holds (MAX_SAMPLE_RATE_HZ).
         self.block_capacity = math.ceil(params.filter.block_duration_s * MAX_SAMPLE_RATE_HZ)
         self.counters = InputCounters()
@@ -279,6 +282,8 @@ class SampleBlocker:
         # Whether the last two samples before the pending ones stood out from both neighbours.
         self._previous_spike_like = np.zeros(2, dtype=np.bool_)
         self._stuck_run = 0  # length of the identical-current run ending there
+        self._previous_speed = math.nan  # and its speed and stamp
+        self._previous_speed_stamp = math.nan
         self.speed_noise = SpeedNoise(params.noise.speed_std_rad_s)
         self.position_per_speed = PositionPerSpeed()
         self.torque_along_motion = TorqueAlongMotion()
@@ -452,10 +457,11 @@ class SampleBlocker:
         return keep, resets, jumped
 
     # --- checks on complete blocks ------------------------------------------------------
-    def _spikes_and_stuck(self, current: FloatArray, processed: int, final: bool) -> BoolArray:
-        """Rejection mask of the first ``processed`` of the pending ``current`` samples.
+    def _spikes_and_stuck(self, pending: MotorSamples, processed: int, final: bool) -> BoolArray:
+        """Rejection mask of the first ``processed`` of the ``pending`` samples.
 
-        Spikes: samples far from both neighbours, which agree with each other (the context
+        Spikes: speed spikes (:meth:`_speed_spikes`), and currents far from both neighbours,
+        which agree with each other (the context
         at either end is the neighbouring sample, or NaN: never a spike), unless they are the
         middle of five such in a row: a current alternating every sample by more than the
         threshold, a ripple aliased at the sampling frequency, was rejected nearly whole (a
@@ -466,6 +472,7 @@ class SampleBlocker:
         so any run that reaches into the unprocessed tail is already long enough to be judged,
         and a whole stuck run is rejected, its first samples included.
         """
+        current = pending.current_a
         x = np.r_[self._previous_current, current, math.nan]
         before, here, after = x[:-2], x[1:-1], x[2:]
         with np.errstate(invalid="ignore"):
@@ -480,6 +487,7 @@ class SampleBlocker:
         if spike_like.any():
             ripple = flags[:-4] & flags[1:-3] & flags[2:-2] & flags[3:-1] & flags[4:]
             spikes = spike_like & ~ripple
+        spikes = spikes | self._speed_spikes(pending)
         run_ids = np.cumsum(here != before)  # run 0 continues the run before the pending ones
         lengths = np.bincount(run_ids)
         lengths[0] += self._stuck_run
@@ -494,10 +502,37 @@ class SampleBlocker:
             )
             self._previous_current = float(current[processed - 1])
             self._previous_spike_like = flags[processed : processed + 2].copy()
+            self._previous_speed = float(pending.speed_rad_s[processed - 1])
+            self._previous_speed_stamp = float(pending.stamp_s[processed - 1])
         spikes, stuck = spikes[:processed], stuck[:processed]
         self._count(RejectReason.SPIKE, spikes)
         self._count(RejectReason.STUCK, stuck & ~spikes)
         return np.asarray(spikes | stuck)
+
+    def _speed_spikes(self, pending: MotorSamples) -> BoolArray:
+        """Per pending sample: a speed further from both neighbours than the motor can change
+        its speed in the time between (``EstimatorParams.max_motor_acceleration_rad_s2``
+        times it, plus SPIKE_SIGMAS of ``noise.speed_std_rad_s``), while the neighbours are
+        within the sum of those two bounds of each other: no motion goes there and back, the
+        sample is wrong (one at -500 rad/s in a stroke made its block a reversal and the load
+        was forgotten). Slower changes are left: a coarse encoder differenced into the speed
+        steps by a count per sample (6 rad/s at 1024 counts and 1 kHz), and before the speed
+        noise is measured in motion only the parameter would say so. The context at either end
+        is as for the current; across a time reset or a stamp that did not advance (never
+        between accepted samples of one time line) no bound applies."""
+        w = np.r_[self._previous_speed, pending.speed_rad_s, math.nan]
+        steps_s = np.diff(np.r_[self._previous_speed_stamp, pending.stamp_s, math.nan])
+        # A NaN step (no neighbour) compares False: no bound, never a spike.
+        advancing = steps_s > 0.0
+        reach = np.full(len(steps_s), np.inf)
+        reach[advancing] = self._max_acceleration * steps_s[advancing] + self._spike_rad_s
+        before, here, after = w[:-2], w[1:-1], w[2:]
+        with np.errstate(invalid="ignore"):
+            return np.asarray(
+                (np.abs(here - before) > reach[:-1])
+                & (np.abs(here - after) > reach[1:])
+                & (np.abs(after - before) < reach[:-1] + reach[1:])
+            )
 
     def _blocks(
         self, pending: MotorSamples, rejected_before: Counts, *, final: bool
@@ -541,7 +576,7 @@ class SampleBlocker:
         self._last_processed_stamp = float(t[end - 1])
         run = pending[:end]
         accepted_earlier, rejected_earlier = self.counters.accepted, self._rejected(IN_BLOCKS)
-        rejected = self._spikes_and_stuck(pending.current_a, end, final)
+        rejected = self._spikes_and_stuck(pending, end, final)
         self.counters.accepted += end - int(np.count_nonzero(rejected))
         self._pending = pending[end:]
         self._pending_rejected_before = _compact(_at(rejected_before, slice(end, None)))

@@ -195,7 +195,10 @@ class FilterParams:
     count whose loads differ by less than this many standard deviations become one
     (hypotheses.py: a jam that happened unseen and one that starts now are different).
     max_speed_rad_s: motor speeds beyond it are out of range (rejected). Default 0 means
-    three times the preset's largest speed.
+    three times the preset's largest speed. max_acceleration_rad_s2: the motor's speed
+    cannot change faster; a speed sample further from both its neighbours than that allows
+    is a spike (rejected; inputs.py). Default 0 means from the drive train
+    (EstimatorParams.max_motor_acceleration_rad_s2).
     """
 
     block_duration_s: float = 0.04
@@ -210,6 +213,7 @@ class FilterParams:
     components_per_count: int = 2
     merge_distance_sigmas: float = 3.0
     max_speed_rad_s: float = 0.0
+    max_acceleration_rad_s2: float = 0.0
 
     def __post_init__(self) -> None:
         require_ranges(
@@ -227,6 +231,7 @@ class FilterParams:
                 "min_established_probability": (0.0, 0.1),
                 "merge_distance_sigmas": (0.0, 1e3),
                 "max_speed_rad_s": (0.0, 1e5),
+                "max_acceleration_rad_s2": (0.0, 1e9),
             },
         )
         require(
@@ -403,6 +408,22 @@ class EstimatorParams:
             return self.filter.max_speed_rad_s
         screw = self.actuator.preset.largest_speed_rpm * 2.0 * math.pi / 60.0
         return 3.0 * screw * self.actuator.drive_train.gear_ratio
+
+    @property
+    def max_motor_acceleration_rad_s2(self) -> float:
+        """Largest plausible motor acceleration (``filter.max_acceleration_rad_s2``, or else):
+        the motor's largest torque (k_t at ``max_current_a``) and the screw torque of the
+        largest load (F L / 2 pi through the gear ratio, no efficiency: at most; the load
+        bound ``model.plausible_load_factor``, or without one the divergence bound), both the
+        same way, over the inertia at the motor. 1.9e5 rad/s^2 for the bundled actuator."""
+        if self.filter.max_acceleration_rad_s2 > 0.0:
+            return self.filter.max_acceleration_rad_s2
+        drive = self.actuator.drive_train
+        load_n = self.model.plausible_load_factor * self.load_scale_n or self.diverged_load_n
+        lead_m = self.actuator.preset.geometry.lead_m
+        load_torque_nm = load_n * lead_m / (2.0 * math.pi) / drive.gear_ratio
+        motor_torque_nm = drive.max_current_a * drive.torque_constant_nm_per_a
+        return (motor_torque_nm + load_torque_nm) / drive.inertia_at_motor_kg_m2
 
     @property
     def radial_terms(self) -> bool:

@@ -62,6 +62,7 @@ def test_blocks_do_not_depend_on_the_chunking(size: int) -> None:
     """Four seconds: a hundred blocks, so that the speed noise's measurement (HISTORY_BLOCKS)
     sets the later blocks' acceleration variances too."""
     samples = with_values(run(4.0), current_a=(500, 40.0), speed_rad_s=(900, math.nan))
+    samples = with_values(samples, speed_rad_s=(1500, -500.0))
     samples.current_a[1200 : 1200 + 3 * STUCK_RUN_SAMPLES] = 3.3
     reference, ref_blocker = feed_in_chunks(samples, len(samples))
     blocks, blocker = feed_in_chunks(samples, size)
@@ -169,6 +170,52 @@ def test_a_current_alternating_every_sample_is_no_train_of_spikes(size: int) -> 
     _, blocker = feed_in_chunks(ripple, size)
     assert blocker.counters.rejected[RejectReason.SPIKE] == 4 + 1 + 3
     assert blocker.counters.rejected_total == 8
+
+
+def with_speed_departures(departures_rad_s: dict[int, float]) -> MotorSamples:
+    """One second at 150 rad/s (1 kHz) with single speed samples moved by the given amounts."""
+    samples = run(1.0)
+    speed = samples.speed_rad_s.copy()
+    for index, departure in departures_rad_s.items():
+        speed[index] += departure
+    return MotorSamples(samples.stamp_s, samples.current_a, speed, samples.position_rad)
+
+
+@pytest.mark.parametrize("size", [1, 9, 1000])
+def test_a_speed_sample_the_motor_cannot_reach_is_a_spike(size: int) -> None:
+    """One speed sample at -500 rad/s from 150 (the sensor-faults scene's): kept, it made its
+    block a reversal, whose load the estimator forgets. A speed the motor cannot reach and
+    leave again in a millisecond is rejected as a spike, its block moves forward."""
+    samples = with_speed_departures({300: -500.0})
+    blocks, blocker = feed_in_chunks(samples, size)
+    assert blocker.counters.rejected[RejectReason.SPIKE] == 1
+    assert blocker.counters.rejected_total == 1
+    assert all(b.direction == 1 and not b.reverses for b in blocks)
+
+
+def test_a_speed_spike_is_what_the_motor_cannot_accelerate_to_and_back() -> None:
+    """The bound is the drive's largest acceleration over the sample's interval plus
+    SPIKE_SIGMAS speed noise sigmas: a departure of 0.9 times the acceleration's share is
+    kept, 1.1 times is a spike, whichever way; so are steps of one encoder count a sample (a
+    coarse encoder differenced into the speed: 2 pi / 1024 per ms) and a step of the whole
+    speed. filter.max_acceleration_rad_s2 replaces the drive's bound."""
+    reach = PARAMS.max_motor_acceleration_rad_s2 / RATE_HZ
+    assert reach > 100.0  # the bundled drive: 36 N m of motor torque over 2.4e-4 kg m^2
+    encoder_step = 2.0 * math.pi / 1024 * RATE_HZ
+    departures = {100: 0.9 * reach, 200: -0.9 * reach, 300: encoder_step, 600: -encoder_step}
+    samples = with_speed_departures({**departures, 400: 1.1 * reach, 500: -1.1 * reach})
+    samples.speed_rad_s[700:] = 0.0
+    _, blocker = feed_in_chunks(samples, 64)
+    assert blocker.counters.rejected[RejectReason.SPIKE] == 2
+    assert blocker.counters.rejected_total == 2
+    tighter = dataclasses.replace(
+        PARAMS, filter=dataclasses.replace(PARAMS.filter, max_acceleration_rad_s2=1e4)
+    )
+    assert tighter.max_motor_acceleration_rad_s2 == 1e4
+    told = SampleBlocker(tighter)
+    fed_in_chunks(told.feed, samples, 64) + told.flush()
+    # 10 rad/s a sample plus 2.4 of noise: the four departures too, the encoder's steps not.
+    assert told.counters.rejected[RejectReason.SPIKE] == 4
 
 
 @pytest.mark.parametrize("size", [1, 9, 1000])
