@@ -443,6 +443,30 @@ def test_sensor_faults_are_counted_and_never_reach_the_outputs() -> None:
     assert any(s.event == EstimateEvent.TIME_RESET for s in states)
 
 
+def test_a_wild_speed_sample_in_a_stroke_does_not_forget_the_load() -> None:
+    """One speed sample against the motion (-500 rad/s, as in the sensor-faults bag) in the
+    middle of the heaviest stroke: the input stage rejects it as a spike, so its block is no
+    reversal and every estimate stays within 0.5 % of the rated load of the run without it
+    (before 2026-11-29 the block reversed and the load was forgotten: 6.0 kN off here)."""
+    scene = scene_from_mapping(downhole(duration_s=12.0))
+    motor = simulate(scene).motor
+    speed = np.abs(motor.speed_rad_s)
+    at = int(np.argmax(np.abs(motor.current_a) * (speed > 0.9 * speed.max())))
+    spiked = motor.speed_rad_s.copy()
+    spiked[at] = -500.0 * np.sign(spiked[at])
+    params = EstimatorParams(actuator=scene.actuator)
+    loads = []
+    for samples in (motor, dataclasses.replace(motor, speed_rad_s=spiked)):
+        estimator = HealthEstimator(params)
+        states = estimator.process(samples) + estimator.finish()
+        loads.append(np.array([s.axial_load_n for s in states]))
+        assert states[-1].samples_rejected == (len(loads) == 2)
+    clean, with_spike = loads
+    stamps = np.array([s.stamp_s for s in states])
+    assert abs(np.interp(motor.stamp_s[at], stamps, clean)) > 20e3  # in a loaded stroke
+    assert np.max(np.abs(with_spike - clean)) < 0.005 * params.rated_load_n
+
+
 def test_a_sensor_clock_jumping_by_decades_is_a_gap_not_a_jam() -> None:
     """A drive clock that switches from boot time to the epoch mid-run (+1.7e9 s): the
     estimator re-acquires the load after the gap, declares no jam and keeps tracking."""
