@@ -517,7 +517,9 @@ class SampleBlocker:
         sample is wrong (one at -500 rad/s in a stroke made its block a reversal and the load
         was forgotten). Slower changes are left: a coarse encoder differenced into the speed
         steps by a count per sample (6 rad/s at 1024 counts and 1 kHz), and before the speed
-        noise is measured in motion only the parameter would say so. The context at either end
+        noise is measured in motion only the parameter would say so (between samples stamped
+        less than 20 us apart, stamps batched on receipt, such steps exceed the bound and are
+        rejected: counted, never silent). The context at either end
         is as for the current; across a time reset or a stamp that did not advance (never
         between accepted samples of one time line) no bound applies."""
         w = np.r_[self._previous_speed, pending.speed_rad_s, math.nan]
