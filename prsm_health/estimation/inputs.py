@@ -282,7 +282,7 @@ class SampleBlocker:
         # Whether the last two samples before the pending ones stood out from both neighbours.
         self._previous_spike_like = np.zeros(2, dtype=np.bool_)
         self._stuck_run = 0  # length of the identical-current run ending there
-        self._previous_speed = math.nan  # and its speed and stamp
+        self._previous_speed = math.nan  # the speed and stamp of that last sample
         self._previous_speed_stamp = math.nan
         self.speed_noise = SpeedNoise(params.noise.speed_std_rad_s)
         self.position_per_speed = PositionPerSpeed()
@@ -513,15 +513,15 @@ class SampleBlocker:
         """Per pending sample: a speed further from both neighbours than the motor can change
         its speed in the time between (``EstimatorParams.max_motor_acceleration_rad_s2``
         times it, plus SPIKE_SIGMAS of ``noise.speed_std_rad_s``), while the neighbours are
-        within the sum of those two bounds of each other: no motion goes there and back, the
-        sample is wrong (one at -500 rad/s in a stroke made its block a reversal and the load
-        was forgotten). Slower changes are left: a coarse encoder differenced into the speed
-        steps by a count per sample (6 rad/s at 1024 counts and 1 kHz), and before the speed
-        noise is measured in motion only the parameter would say so (between samples stamped
-        less than 20 us apart, stamps batched on receipt, such steps exceed the bound and are
-        rejected: counted, never silent). The context at either end
-        is as for the current; across a time reset or a stamp that did not advance (never
-        between accepted samples of one time line) no bound applies."""
+        within the sum of those two bounds of each other. No motion goes there and back: the
+        sample is wrong (one at -500 rad/s in a stroke made its block a reversal, and the load
+        was forgotten). The bound is the drive's, not the speed noise's: a coarse encoder
+        differenced into the speed steps by a count per sample (6 rad/s at 1024 counts and
+        1 kHz), which only the noise measured in motion, not yet there at the start, would
+        allow for. Between samples stamped less than 20 us apart (stamps batched on receipt)
+        such steps exceed it and are rejected, counted. The context at either end is as for
+        the current; across a time reset or a stamp that did not advance (never between
+        accepted samples of one time line) no bound applies."""
         w = np.r_[self._previous_speed, pending.speed_rad_s, math.nan]
         steps_s = np.diff(np.r_[self._previous_speed_stamp, pending.stamp_s, math.nan])
         # A NaN step (no neighbour) compares False: no bound, never a spike.
