@@ -30,6 +30,7 @@ from prsm_health.estimation.estimate import UM_PER_M
 from prsm_health.estimation.inputs import RejectReason
 from prsm_health.estimation.metrics import Metrics
 from prsm_health.estimation.motion_torque import against_motion
+from prsm_health.estimation.noise_history import HISTORY_BLOCKS
 from prsm_health.estimation.params import (
     EstimatorParams,
     bundled_params_file,
@@ -37,7 +38,6 @@ from prsm_health.estimation.params import (
     params_from_mapping,
 )
 from prsm_health.estimation.position_speed import disagreement
-from prsm_health.estimation.speed_noise import HISTORY_BLOCKS
 from prsm_health.interrupt import (
     EXIT_INTERRUPTED,
     remove_output,

@@ -30,8 +30,10 @@ from prsm_health.estimation.inputs import (
     merge_blocks,
 )
 from prsm_health.estimation.measurement import LOAD, TorqueModel
+from prsm_health.estimation.noise_history import NoiseHistory
 from prsm_health.estimation.params import MIN_BLOCKS_FOR_DIVERGENCE, EstimatorParams
 from prsm_health.estimation.snapshot import (
+    NOISE_KEYS,
     SNAPSHOT_FORMAT,
     actuator_fingerprint,
     actuator_parts,
@@ -164,7 +166,7 @@ class HealthEstimator:
             "degradation": self._degradation.state.to_dict(),
             "samples_accepted": self.counters.accepted,
             "samples_rejected": self.counters.rejected,
-            "speed_noise_var_rad2_s2": self._blocker.speed_noise.saved(),
+            **{key: noise.saved() for key, noise in self._blocker_noises()},
         }
 
     def restore(self, snapshot: dict[str, Any]) -> tuple[str, ...]:
@@ -203,10 +205,16 @@ class HealthEstimator:
         self._degradation.state = saved.degradation
         self.counters.accepted = saved.samples_accepted
         self.counters.rejected = saved.samples_rejected
-        self._blocker.speed_noise.resume(saved.speed_noise_var_rad2_s2)
+        for key, noise in self._blocker_noises():
+            noise.resume(saved.noise_variances[key])
         self._resumed = True
         self._last = None
         return saved.changed_parts
+
+    def _blocker_noises(self) -> zip[tuple[str, NoiseHistory]]:
+        """The noises the input stage measures, with their snapshot keys."""
+        blocker = self._blocker
+        return zip(NOISE_KEYS, (blocker.speed_noise, blocker.current_noise), strict=True)
 
     def reset_after_maintenance(
         self, jammed_rollers: int, *, reset_precision_loss: bool, reset_fatigue_damage: bool

@@ -33,9 +33,9 @@ import numpy as np
 from numpy.typing import NDArray
 
 from prsm_health.estimation.motion_torque import TorqueAlongMotion
+from prsm_health.estimation.noise_history import MIN_SAMPLES, NoiseHistory
 from prsm_health.estimation.params import EstimatorParams
 from prsm_health.estimation.position_speed import PositionPerSpeed
-from prsm_health.estimation.speed_noise import MIN_SAMPLES, SpeedNoise
 from prsm_health.physics.meshing import carrier_speed_rad_s
 from prsm_health.signals import BoolArray, FloatArray, IntArray, MotorSamples
 
@@ -44,9 +44,19 @@ from prsm_health.signals import BoolArray, FloatArray, IntArray, MotorSamples
 Counts = IntArray | int
 
 #: A current sample this many noise standard deviations away from both neighbours, which
-#: agree with each other, is a spike; a speed sample is one this many beyond what the motor
-#: can accelerate in the time between (SampleBlocker._speed_spikes).
+#: agree with each other, is a spike (the noise measured, SampleBlocker._current_spike_a); a
+#: speed sample is one this many beyond what the motor can accelerate in the time between
+#: (SampleBlocker._speed_spikes).
 SPIKE_SIGMAS = 12.0
+#: The median magnitude of a second difference of white noise of standard deviation sigma
+#: (x[i + 2] - 2 x[i] + x[i - 2]), over sigma: the difference has the standard deviation
+#: sqrt(6) sigma, and the median of a normal magnitude is 0.6745 of its standard deviation.
+MEDIAN_SECOND_DIFFERENCE_SIGMAS = 0.6745 * math.sqrt(6.0)
+#: The current's noise is measured once this many blocks are (0.32 s at 40 ms), not only
+#: from HISTORY_BLOCKS on as the speed's: until then ten times the parameter's noise had 9 %
+#: of its samples rejected as spikes. Each block's estimate is within about 25 %, the median
+#: of eight within about 10 %, far inside the spike threshold's margin.
+CURRENT_NOISE_FIRST_BLOCKS = 8
 #: Two consecutive motor positions within this [rad] of zero that differ by more than half a
 #: turn show that the positions wrap into one turn: from then on no travel is taken from them.
 WRAPPED_WITHIN_RAD = 2.0 * math.pi
@@ -117,7 +127,7 @@ class InputMeasures:
     """What the input stage has measured of its inputs so far (:meth:`SampleBlocker.measures`).
 
     speed_noise_std_rad_s: the motor speed's noise in motion
-    (:class:`~prsm_health.estimation.speed_noise.SpeedNoise`; None: not yet).
+    (:class:`~prsm_health.estimation.noise_history.NoiseHistory`; None: not yet).
     position_per_speed: how far the motor position moves per radian the speed says, in motion
     (1 when they agree; :mod:`prsm_health.estimation.position_speed`; None: not yet).
     torque_along_motion_nm: the motor torque along the motion in motion, forward and reverse
@@ -148,7 +158,7 @@ class Block:
     motor_acceleration_var_rad2_s4: that acceleration's variance from the speed noise,
     2 sigma^2 / span^2 (two samples' difference; 0 where there is no span to take one), sigma
     the larger of ``noise.speed_std_rad_s`` and the noise measured in motion
-    (:class:`~prsm_health.estimation.speed_noise.SpeedNoise`).
+    (:class:`~prsm_health.estimation.noise_history.NoiseHistory`).
     carrier_cos, carrier_sin: means of cos and sin of the carrier angle (exact averaging of
     the carrier-frequency ripple).
     direction: +1 or -1 when every sample moves that way faster than the standstill speed,
@@ -250,7 +260,6 @@ class SampleBlocker:
             params.max_motor_speed_rad_s,
             LARGEST_POSITION_RAD,
         )
-        self._spike_a = SPIKE_SIGMAS * params.noise.current_std_a
         self._spike_rad_s = SPIKE_SIGMAS * params.noise.speed_std_rad_s
         self._max_acceleration = params.max_motor_acceleration_rad_s2
         #: The most samples a block holds (MAX_SAMPLE_RATE_HZ).
@@ -284,14 +293,17 @@ class SampleBlocker:
         self._stuck_run = 0  # length of the identical-current run ending there
         self._previous_speed = math.nan  # the speed and stamp of that last sample
         self._previous_speed_stamp = math.nan
-        self.speed_noise = SpeedNoise(params.noise.speed_std_rad_s)
+        self.speed_noise = NoiseHistory(params.noise.speed_std_rad_s)
+        self.current_noise = NoiseHistory(
+            params.noise.current_std_a, first_blocks=CURRENT_NOISE_FIRST_BLOCKS
+        )
         self.position_per_speed = PositionPerSpeed()
         self.torque_along_motion = TorqueAlongMotion()
 
     def measures(self) -> InputMeasures:
         """What has been measured of the inputs so far."""
         return InputMeasures(
-            speed_noise_std_rad_s=self.speed_noise.measured_std_rad_s,
+            speed_noise_std_rad_s=self.speed_noise.measured_std,
             position_per_speed=self.position_per_speed.ratio,
             torque_along_motion_nm=self.torque_along_motion.medians_nm,
             out_of_range_by_field=dict(self.out_of_range),
@@ -457,11 +469,13 @@ class SampleBlocker:
         return keep, resets, jumped
 
     # --- checks on complete blocks ------------------------------------------------------
-    def _spikes_and_stuck(self, pending: MotorSamples, processed: int, final: bool) -> BoolArray:
+    def _spikes_and_stuck(
+        self, pending: MotorSamples, spike_a: FloatArray, processed: int, final: bool
+    ) -> BoolArray:
         """Rejection mask of the first ``processed`` of the ``pending`` samples.
 
-        Spikes: speed spikes (:meth:`_speed_spikes`), and currents far from both neighbours,
-        which agree with each other (the context
+        Spikes: speed spikes (:meth:`_speed_spikes`), and currents further than ``spike_a``
+        (per pending sample) from both neighbours, which agree within half of it (the context
         at either end is the neighbouring sample, or NaN: never a spike), unless they are the
         middle of five such in a row: a current alternating every sample by more than the
         threshold, a ripple aliased at the sampling frequency, was rejected nearly whole (a
@@ -477,9 +491,9 @@ class SampleBlocker:
         before, here, after = x[:-2], x[1:-1], x[2:]
         with np.errstate(invalid="ignore"):
             spike_like = (
-                (np.abs(here - before) > self._spike_a)
-                & (np.abs(here - after) > self._spike_a)
-                & (np.abs(after - before) < 0.5 * self._spike_a)
+                (np.abs(here - before) > spike_a)
+                & (np.abs(here - after) > spike_a)
+                & (np.abs(after - before) < 0.5 * spike_a)
             )
         # Spike-like samples that are the middle of five in a row are a ripple, not spikes.
         flags = np.r_[self._previous_spike_like, spike_like, False, False]
@@ -508,6 +522,38 @@ class SampleBlocker:
         self._count(RejectReason.SPIKE, spikes)
         self._count(RejectReason.STUCK, stuck & ~spikes)
         return np.asarray(spikes | stuck)
+
+    def _current_spike_a(self, current: FloatArray, starts: IntArray, end: int) -> FloatArray:
+        """Per sample of ``current`` (the pending ones): the current spike threshold,
+        SPIKE_SIGMAS times the current noise known before its block (``starts``: the first
+        sample of each complete block, which end at ``end``; the samples after ``end`` take
+        the noise known after the last). Each block's noise is measured from its samples,
+        before the check, robustly: the median magnitude of their second differences two
+        samples apart, over MEDIAN_SECOND_DIFFERENCE_SIGMAS (a spike or a step moves a few
+        of them, a smooth change hardly any, and a current alternating every sample, a ripple
+        aliased at the sampling frequency, none: it is no noise that would hide spikes),
+        measured on blocks of at least MIN_SAMPLES such differences, and
+        taken as NoiseHistory does the speed's (never below ``noise.current_std_a``). A
+        current noisier than the parameter had its tails rejected as spikes: 0.5 % of the
+        samples at four times it, 9 % at ten times."""
+        counts = np.diff(np.r_[starts, end])
+        block_of = np.repeat(np.arange(len(starts)), counts)
+        inside = block_of[:-4] == block_of[4:]  # a sample and both others in one block
+        x = current[:end]
+        magnitude = np.abs(x[4:] - 2.0 * x[2:-2] + x[:-4])[inside]
+        owner = block_of[2:-2][inside]
+        per_block = np.bincount(owner, minlength=len(starts))
+        variances = np.zeros(len(starts))
+        if len(magnitude):
+            ordered = magnitude[np.lexsort((magnitude, owner))]
+            first = np.cumsum(per_block) - per_block
+            low = np.minimum(first + (per_block - 1) // 2, len(ordered) - 1)
+            high = np.minimum(first + per_block // 2, len(ordered) - 1)
+            median = 0.5 * (ordered[low] + ordered[high])
+            variances = (median / MEDIAN_SECOND_DIFFERENCE_SIGMAS) ** 2
+        before, after = self.current_noise.variances_before(variances, per_block >= MIN_SAMPLES)
+        variance = np.r_[np.repeat(before, counts), np.full(len(current) - end, after)]
+        return np.asarray(SPIKE_SIGMAS * np.sqrt(variance))
 
     def _speed_spikes(self, pending: MotorSamples) -> BoolArray:
         """Per pending sample: a speed further from both neighbours than the motor can change
@@ -578,7 +624,8 @@ class SampleBlocker:
         self._last_processed_stamp = float(t[end - 1])
         run = pending[:end]
         accepted_earlier, rejected_earlier = self.counters.accepted, self._rejected(IN_BLOCKS)
-        rejected = self._spikes_and_stuck(pending, end, final)
+        spike_a = self._current_spike_a(pending.current_a, starts[:complete], end)
+        rejected = self._spikes_and_stuck(pending, spike_a, end, final)
         self.counters.accepted += end - int(np.count_nonzero(rejected))
         self._pending = pending[end:]
         self._pending_rejected_before = _compact(_at(rejected_before, slice(end, None)))

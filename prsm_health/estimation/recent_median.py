@@ -6,7 +6,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from prsm_health.estimation.speed_noise import HISTORY_BLOCKS, history_median
+from prsm_health.estimation.noise_history import HISTORY_BLOCKS, history_median
 from prsm_health.signals import FloatArray
 
 

@@ -28,6 +28,9 @@ SNAPSHOT_LARGEST_VALUE = 1e100
 #: uint64 and the input stage adds them up in int64 (three counts of 2^62 - 1 each passed a
 #: check of each alone and overflowed every block after). 2^62 samples at 1 kHz are 146 My.
 SNAPSHOT_LARGEST_COUNT = 2**62
+#: The snapshot's keys of the noises the input stage measures (inputs.SampleBlocker): the
+#: motor speed's in motion [rad^2/s^2] and the motor current's [A^2].
+NOISE_KEYS = ("speed_noise_var_rad2_s2", "current_noise_var_a2")
 
 
 class SnapshotError(ValueError):
@@ -116,9 +119,10 @@ class SavedState:
     #: The parts of :func:`actuator_parts` that changed since the save: empty when the
     #: filters' states resume too, else only what belongs to the screw does.
     changed_parts: tuple[str, ...]
-    #: The speed noise measured in motion (:meth:`SpeedNoise.saved
-    #: <prsm_health.estimation.speed_noise.SpeedNoise.saved>`; empty in a state saved before).
-    speed_noise_var_rad2_s2: list[float]
+    #: The noises the input stage measured, by the snapshot's key (NOISE_KEYS; each
+    #: :meth:`NoiseHistory.saved <prsm_health.estimation.noise_history.NoiseHistory.saved>`;
+    #: empty in a state saved before it was measured).
+    noise_variances: dict[str, list[float]]
 
 
 def read_snapshot(
@@ -157,7 +161,7 @@ def read_snapshot(
         degradation = Degradation(**{k: float(v) for k, v in snapshot["degradation"].items()})
         accepted = int(snapshot["samples_accepted"])
         rejected = [int(v) for v in snapshot["samples_rejected"]]
-        speed_noise = [float(v) for v in snapshot.get("speed_noise_var_rad2_s2", [])]
+        noises = {key: [float(v) for v in snapshot.get(key, [])] for key in NOISE_KEYS}
     except SnapshotError:
         raise  # it says what is wrong
     except (KeyError, TypeError, ValueError, AttributeError) as exc:
@@ -169,10 +173,11 @@ def read_snapshot(
         raise SnapshotError(
             f"degradation values must be >= 0 and < {SNAPSHOT_LARGEST_VALUE:g}: {degradation}"
         )
-    if not all(0.0 <= v < SNAPSHOT_LARGEST_VALUE for v in speed_noise):  # NaN fails too
-        raise SnapshotError(
-            f"speed noise variances must be >= 0 and < {SNAPSHOT_LARGEST_VALUE:g}: {speed_noise}"
-        )
+    for key, variances in noises.items():
+        if not all(0.0 <= v < SNAPSHOT_LARGEST_VALUE for v in variances):  # NaN fails too
+            raise SnapshotError(
+                f"{key}: variances must be >= 0 and < {SNAPSHOT_LARGEST_VALUE:g}: {variances}"
+            )
     counts = [accepted, *rejected]
     if (
         len(rejected) != rejection_reasons
@@ -191,7 +196,7 @@ def read_snapshot(
         accepted,
         rejected,
         () if whole else changed_parts(snapshot.get("parts"), params),
-        speed_noise,
+        noises,
     )
 
 

@@ -12,6 +12,7 @@ import pytest
 from prsm_health.actuator import Actuator
 from prsm_health.estimation.estimator import HealthEstimator
 from prsm_health.estimation.inputs import (
+    CURRENT_NOISE_FIRST_BLOCKS,
     LARGEST_STAMP_S,
     STUCK_RUN_SAMPLES,
     TIME_RESET_SAMPLES,
@@ -20,8 +21,8 @@ from prsm_health.estimation.inputs import (
     SampleBlocker,
     merge_blocks,
 )
+from prsm_health.estimation.noise_history import HISTORY_BLOCKS
 from prsm_health.estimation.params import EstimatorParams
-from prsm_health.estimation.speed_noise import HISTORY_BLOCKS
 from prsm_health.physics.meshing import carrier_speed_rad_s
 from prsm_health.physics.presets import load_preset
 from prsm_health.signals import MotorSamples
@@ -68,7 +69,7 @@ def test_blocks_do_not_depend_on_the_chunking(size: int) -> None:
     blocks, blocker = feed_in_chunks(samples, size)
     assert blocks == reference
     assert blocker.counters == ref_blocker.counters
-    assert blocker.speed_noise.measured_std_rad_s is not None
+    assert blocker.speed_noise.measured_std is not None
 
 
 def test_each_block_counts_the_samples_up_to_its_last_one() -> None:
@@ -216,6 +217,23 @@ def test_a_speed_spike_is_what_the_motor_cannot_accelerate_to_and_back() -> None
     fed_in_chunks(told.feed, samples, 64) + told.flush()
     # 10 rad/s a sample plus 2.4 of noise: the four departures too, the encoder's steps not.
     assert told.counters.rejected[RejectReason.SPIKE] == 4
+
+
+@pytest.mark.parametrize("size", [1, 7, 1000])
+def test_a_current_noisier_than_its_parameter_is_measured_not_taken_for_spikes(size: int) -> None:
+    """Ten times the parameter's current noise (0.5 A against 0.05): its tails, 12 of the
+    parameter's sigmas but 1.2 of the noise's, were rejected as spikes (9 % of the samples).
+    The noise is measured from the first CURRENT_NOISE_FIRST_BLOCKS blocks on; after them
+    only the one real spike (25 A) is rejected, in any chunks."""
+    samples = run(6.0)
+    samples.current_a[:] = 5.0 + np.random.default_rng(4).normal(0.0, 0.5, len(samples))
+    samples.current_a[5020] += 25.0
+    blocks, blocker = feed_in_chunks(samples, size)
+    rejected = np.diff([b.rejected_so_far for b in blocks])  # in each block after the first
+    spike = int(np.argmin([abs(b.stamp_s - samples.stamp_s[5020]) for b in blocks]))
+    assert rejected[CURRENT_NOISE_FIRST_BLOCKS - 1 :].sum() == 1 and rejected[spike - 1] == 1
+    assert blocker.counters.rejected_total == blocker.counters.rejected[RejectReason.SPIKE]
+    assert blocker.current_noise.measured_std == pytest.approx(0.5, rel=0.1)
 
 
 @pytest.mark.parametrize("size", [1, 9, 1000])

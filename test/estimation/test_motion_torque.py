@@ -9,10 +9,10 @@ import pytest
 
 from prsm_health.estimation import HealthEstimator
 from prsm_health.estimation.motion_torque import TorqueAlongMotion, against_motion
-from prsm_health.estimation.speed_noise import HISTORY_BLOCKS
+from prsm_health.estimation.noise_history import HISTORY_BLOCKS
 from prsm_health.signals import MotorSamples
+from test.estimation.test_noise_history import moving_run
 from test.estimation.test_position_speed import PARAMS
-from test.estimation.test_speed_noise import moving_run
 
 
 def test_each_direction_has_the_median_of_its_last_blocks() -> None:

@@ -10,12 +10,12 @@ import pytest
 
 from prsm_health.actuator import Actuator
 from prsm_health.estimation import HealthEstimator
+from prsm_health.estimation.noise_history import HISTORY_BLOCKS
 from prsm_health.estimation.params import EstimatorParams
 from prsm_health.estimation.position_speed import PositionPerSpeed, disagreement
-from prsm_health.estimation.speed_noise import HISTORY_BLOCKS
 from prsm_health.physics.presets import load_preset
 from prsm_health.signals import MotorSamples
-from test.estimation.test_speed_noise import moving_run
+from test.estimation.test_noise_history import moving_run
 
 PARAMS = EstimatorParams(actuator=Actuator(preset=load_preset("dong2022-downhole")))
 

@@ -79,6 +79,21 @@ def test_the_measured_speed_noise_survives_a_restart() -> None:
     assert older.input_measures.speed_noise_std_rad_s is None
 
 
+def test_the_measured_current_noise_survives_a_restart() -> None:
+    """As the speed's: a current ten times noisier than the parameter, measured before the
+    save, sets the spike threshold after the restore too (else its tails were rejected as
+    spikes again until it was measured anew)."""
+    samples = moving(1.0)
+    samples.current_a[:] += np.random.default_rng(12).normal(0.0, 0.5, len(samples))
+    first = HealthEstimator(params())
+    first.process(samples)
+    measured = first._blocker.current_noise.measured_std
+    assert measured == pytest.approx(0.5, rel=0.15)
+    resumed = HealthEstimator(params())
+    resumed.restore(json.loads(json.dumps(first.snapshot())))
+    assert resumed._blocker.current_noise.measured_std == measured
+
+
 def test_a_state_of_another_screw_is_refused_as_foreign_unless_damaged() -> None:
     saved = HealthEstimator(params()).snapshot()
     # Said as it is (it read "malformed state: SnapshotError('the state belongs to ...')").
@@ -227,6 +242,8 @@ def test_an_unpruned_bank_restarts_every_count_with_its_probability() -> None:
         lambda s: s.update(speed_noise_var_rad2_s2=[float("nan")]),
         lambda s: s.update(speed_noise_var_rad2_s2=["loud"]),
         lambda s: s.update(speed_noise_var_rad2_s2=4.0),
+        lambda s: s.update(current_noise_var_a2=[float("inf")]),
+        lambda s: s.update(current_noise_var_a2=[-0.1]),
     ],
 )
 def test_a_malformed_state_is_refused(damage: object) -> None:

@@ -10,8 +10,8 @@ import pytest
 
 from prsm_health.actuator import Actuator
 from prsm_health.estimation.inputs import SampleBlocker
+from prsm_health.estimation.noise_history import HISTORY_BLOCKS, MIN_SAMPLES, NoiseHistory
 from prsm_health.estimation.params import EstimatorParams, NoiseParams
-from prsm_health.estimation.speed_noise import HISTORY_BLOCKS, MIN_SAMPLES, SpeedNoise
 from prsm_health.physics.presets import load_preset
 from prsm_health.signals import MotorSamples
 
@@ -36,41 +36,63 @@ def moving_run(seconds: float, speed_std: float, seed: int) -> MotorSamples:
 
 
 def test_the_floor_holds_until_the_history_is_full_then_the_median_above_it() -> None:
-    noise = SpeedNoise(0.1)
+    noise = NoiseHistory(0.1)
     variances = np.r_[np.full(HISTORY_BLOCKS - 1, 4.0), 9.0, 1e-6]
     used = noise.variances(variances, np.ones(len(variances), dtype=np.bool_))
     assert used[: HISTORY_BLOCKS - 1].tolist() == [pytest.approx(0.01)] * (HISTORY_BLOCKS - 1)
     assert used[HISTORY_BLOCKS - 1] == 4.0  # the median of 63 x 4 and one 9
     assert used[HISTORY_BLOCKS] == 4.0  # the median of 62 x 4, a 9 and a 1e-6
-    assert noise.measured_std_rad_s == 2.0
-    quiet = SpeedNoise(3.0)
+    assert noise.measured_std == 2.0
+    quiet = NoiseHistory(3.0)
     assert (
         quiet.variances(np.full(HISTORY_BLOCKS, 4.0), np.ones(HISTORY_BLOCKS, np.bool_))[-1] == 9.0
     )
 
 
 def test_unmeasured_blocks_neither_count_nor_move_the_median() -> None:
-    noise = SpeedNoise(0.1)
+    noise = NoiseHistory(0.1)
     variances = np.r_[np.full(HISTORY_BLOCKS, 4.0), 1e6]
     measured = np.r_[np.ones(HISTORY_BLOCKS, np.bool_), False]
     used = noise.variances(variances, measured)
-    assert used[-1] == 4.0 and noise.measured_std_rad_s == 2.0
-    alone = SpeedNoise(0.1)
+    assert used[-1] == 4.0 and noise.measured_std == 2.0
+    alone = NoiseHistory(0.1)
     assert (
         alone.variances(np.full(HISTORY_BLOCKS, 4.0), np.zeros(HISTORY_BLOCKS, np.bool_)).tolist()
         == [pytest.approx(0.01)] * HISTORY_BLOCKS
     )
-    assert alone.measured_std_rad_s is None
+    assert alone.measured_std is None
 
 
 def test_the_result_does_not_depend_on_the_batches() -> None:
     rng = np.random.default_rng(3)
     variances = rng.chisquare(38, 300) / 38.0
     measured = rng.random(300) > 0.3
-    whole = SpeedNoise(0.5).variances(variances, measured)
-    noise = SpeedNoise(0.5)
+    whole = NoiseHistory(0.5).variances(variances, measured)
+    noise = NoiseHistory(0.5)
     pieces = [noise.variances(variances[i : i + 7], measured[i : i + 7]) for i in range(0, 300, 7)]
     assert np.array_equal(np.concatenate(pieces), whole)
+    whole_before, after = NoiseHistory(0.5, first_blocks=8).variances_before(variances, measured)
+    noise = NoiseHistory(0.5, first_blocks=8)
+    batches = [
+        noise.variances_before(variances[i : i + 7], measured[i : i + 7]) for i in range(0, 300, 7)
+    ]
+    assert np.array_equal(np.concatenate([before for before, _ in batches]), whole_before)
+    assert batches[-1][1] == after
+
+
+def test_before_each_block_and_from_the_first_blocks_on() -> None:
+    """variances_before takes the blocks before each one (the current's spike threshold: the
+    samples after a batch belong to the next block, which the whole batch comes before);
+    first_blocks lets the median of the first measured blocks serve until HISTORY_BLOCKS."""
+    noise = NoiseHistory(0.1, first_blocks=3)
+    variances = np.array([4.0, 9.0, 1e6, 16.0, 25.0])
+    measured = np.array([True, True, False, True, True])
+    before, after = noise.variances_before(variances, measured)
+    # Block 3 follows 4 and 9 (block 2 is not measured): two, fewer than three.
+    assert before.tolist() == [pytest.approx(0.01)] * 4 + [9.0]
+    assert after == 12.5  # the median of 4, 9, 16 and 25
+    assert noise.measured_std == pytest.approx(math.sqrt(12.5))
+    assert NoiseHistory(0.1).variances_before(variances, measured)[1] == pytest.approx(0.01)
 
 
 def test_a_coarse_encoders_speed_noise_is_measured_not_taken_from_the_parameter() -> None:
@@ -83,7 +105,7 @@ def test_a_coarse_encoders_speed_noise_is_measured_not_taken_from_the_parameter(
     blocker = SampleBlocker(PARAMS)
     blocks = blocker.feed(moving_run(12.0, 2.0, seed=5)) + blocker.flush()
     full = [b for b in blocks if b.samples == 40][HISTORY_BLOCKS:]
-    measured = blocker.speed_noise.measured_std_rad_s
+    measured = blocker.speed_noise.measured_std
     assert measured == pytest.approx(2.0, rel=0.05)
     expected = 2.0 * measured**2 / SPAN_S**2
     assert all(b.motor_acceleration_var_rad2_s4 == pytest.approx(expected, rel=0.15) for b in full)
@@ -102,7 +124,7 @@ def test_curving_speed_at_stroke_starts_is_not_taken_for_noise() -> None:
     samples.speed_rad_s[curving] += 60.0 * np.sin(2.0 * math.pi * 2.0 * t[curving])
     blocker = SampleBlocker(params_with_speed_std(0.01))
     blocker.feed(samples)
-    assert blocker.speed_noise.measured_std_rad_s == pytest.approx(0.5, rel=0.1)
+    assert blocker.speed_noise.measured_std == pytest.approx(0.5, rel=0.1)
 
 
 def test_standstill_and_sparse_blocks_are_not_measured() -> None:
@@ -115,9 +137,9 @@ def test_standstill_and_sparse_blocks_are_not_measured() -> None:
     )
     blocker = SampleBlocker(params_with_speed_std(0.01))
     blocker.feed(still)
-    assert blocker.speed_noise.measured_std_rad_s is None
+    assert blocker.speed_noise.measured_std is None
     sparse = moving_run(40.0, 0.5, seed=8)[:: (40 // (MIN_SAMPLES - 1)) + 1]
     blocker = SampleBlocker(params_with_speed_std(0.01))
     blocks = blocker.feed(sparse)
     assert len(blocks) > HISTORY_BLOCKS and max(b.samples for b in blocks) < MIN_SAMPLES
-    assert blocker.speed_noise.measured_std_rad_s is None
+    assert blocker.speed_noise.measured_std is None
