@@ -352,6 +352,7 @@ def _inputs(inputs: InputHealth, th: DiagnosticThresholds, now_s: float) -> _Par
         )
     measures = inputs.measures
     noise, ratio = measures.speed_noise_std_rad_s, measures.position_per_speed
+    current = measures.current_noise_std_a
     if (wrong := disagreement(ratio)) is not None:
         problems.append(wrong)
     forward, reverse = measures.torque_along_motion_nm
@@ -370,6 +371,7 @@ def _inputs(inputs: InputHealth, th: DiagnosticThresholds, now_s: float) -> _Par
         f"{inputs.rate_hz:.0f} Hz, {rejected_total} rejected of {inputs.received} received"
         + ("" if noise is None else f", speed noise {noise:.2f} rad/s")
         + ("" if ratio is None else f", position per speed {ratio:.2f}")
+        + ("" if current is None else f", current noise {current:.3f} A")
     )
     values = {
         "rate_hz": inputs.rate_hz,
@@ -382,6 +384,7 @@ def _inputs(inputs: InputHealth, th: DiagnosticThresholds, now_s: float) -> _Par
         "stamp_rate": inputs.stamp_rate,
         "speed_noise_std_rad_s": -1.0 if noise is None else noise,
         "position_per_speed": -1.0 if ratio is None else ratio,
+        "current_noise_std_a": -1.0 if current is None else current,
     }
     for name, torque in (("forward", forward), ("reverse", reverse)):
         if torque is not None:  # signed: no value can say "not yet"

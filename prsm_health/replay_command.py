@@ -27,7 +27,7 @@ from prsm_health.bags.bagfiles import bag_files
 from prsm_health.bags.reader import joint_names
 from prsm_health.bags.topics import MOTOR_FRAME
 from prsm_health.estimation.estimate import UM_PER_M
-from prsm_health.estimation.inputs import RejectReason
+from prsm_health.estimation.inputs import CURRENT_NOISE_FIRST_BLOCKS, RejectReason
 from prsm_health.estimation.metrics import Metrics
 from prsm_health.estimation.motion_torque import against_motion
 from prsm_health.estimation.noise_history import HISTORY_BLOCKS
@@ -375,6 +375,14 @@ def _reason(reason: RejectReason, result: ReplayResult) -> str:
     return reason.name.lower()
 
 
+def _current_noise(result: ReplayResult) -> str:
+    """The current's noise the input stage measured (its spike threshold's), or why not."""
+    noise = result.measures.current_noise_std_a
+    if noise is None:
+        return f"current noise not measured (under {CURRENT_NOISE_FIRST_BLOCKS} blocks)"
+    return f"current noise {noise:.3f} A"
+
+
 def _measured_in_motion(result: ReplayResult) -> str:
     """The speed noise, the position's agreement with the speed and the motor torque along the
     motion, measured in motion, or why they are not."""
@@ -426,7 +434,8 @@ def summary(bag: Path, source: str, result: ReplayResult) -> str:
         f"{result.elapsed_s:.2f} s ({rate:,.0f} samples/s); parameters: {source}",
         f"  samples accepted {counters.accepted}, rejected {counters.rejected_total}"
         + (f" ({_rejections(result)})" if counters.rejected_total else "")
-        + f"; time resets {counters.time_resets}, gaps {counters.gaps}",
+        + f"; time resets {counters.time_resets}, gaps {counters.gaps}; "
+        + _current_noise(result),
         f"  inputs in motion: {_measured_in_motion(result)}",
     ]
     if result.damage is not None:

@@ -201,6 +201,12 @@ def test_input_health_rate_and_rejections() -> None:
     )[INPUT_HEALTH]
     assert level == Level.OK and message.endswith(" received, speed noise 1.85 rad/s")
     assert values["speed_noise_std_rad_s"] == "1.853"
+    assert values["current_noise_std_a"] == "-1"  # not measured yet
+    level, message, values = statuses(i=inputs(measures=InputMeasures(current_noise_std_a=0.21)))[
+        INPUT_HEALTH
+    ]
+    assert level == Level.OK and message.endswith(" received, current noise 0.210 A")
+    assert values["current_noise_std_a"] == "0.21"
     assert values["position_per_speed"] == "-1"  # not measured yet
     level, message, values = statuses(i=inputs(measures=InputMeasures(position_per_speed=1.04)))[
         INPUT_HEALTH

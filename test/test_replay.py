@@ -889,7 +889,7 @@ def test_an_output_that_fails_to_write_still_gets_the_summary_printed(
     assert code == 2 and "--report: cannot write into" in captured.err
     assert "samples accepted 12000" in captured.out
     assert re.search(
-        r"gaps 0\n  inputs in motion: speed noise 0\.\d\d rad/s; "
+        r"gaps 0; current noise 0\.0\d\d A\n  inputs in motion: speed noise 0\.\d\d rad/s; "
         r"position per speed (0\.99|1\.00); "
         r"torque along the motion \+\d\.\d\d N·m forward, \+\d\.\d\d N·m reverse\n",
         captured.out,
@@ -902,6 +902,7 @@ def test_the_summary_says_what_was_not_measured_and_inputs_that_disagree(
     result = replay(bag, params())
     unmeasured = dataclasses.replace(result, measures=InputMeasures())
     text = replay_command.summary(bag, "x", unmeasured)
+    assert "gaps 0; current noise not measured (under 8 blocks)\n" in text
     assert (
         "  inputs in motion: speed noise not measured (under 64 blocks in motion); position and "
         "speed not compared (under 64 blocks in motion); torque along the motion not measured "
@@ -944,7 +945,9 @@ def test_the_summary_names_the_rejections_by_reason_and_field(bag: Path) -> None
     )
     text = replay_command.summary(bag, "x", rejected)
     assert ", rejected 33 (non_finite 2, out_of_range: speed 30, spike 1); time resets" in text
-    assert ", rejected 0; time resets 0, gaps 0\n" in replay_command.summary(bag, "x", result)
+    assert ", rejected 0; time resets 0, gaps 0; current noise" in replay_command.summary(
+        bag, "x", result
+    )
 
 
 def test_the_summary_says_how_often_the_count_was_right(bag: Path) -> None:

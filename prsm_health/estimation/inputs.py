@@ -126,8 +126,8 @@ class InputCounters:
 class InputMeasures:
     """What the input stage has measured of its inputs so far (:meth:`SampleBlocker.measures`).
 
-    speed_noise_std_rad_s: the motor speed's noise in motion
-    (:class:`~prsm_health.estimation.noise_history.NoiseHistory`; None: not yet).
+    speed_noise_std_rad_s: the motor speed's noise in motion, current_noise_std_a: the motor
+    current's (:class:`~prsm_health.estimation.noise_history.NoiseHistory`; None: not yet).
     position_per_speed: how far the motor position moves per radian the speed says, in motion
     (1 when they agree; :mod:`prsm_health.estimation.position_speed`; None: not yet).
     torque_along_motion_nm: the motor torque along the motion in motion, forward and reverse
@@ -135,10 +135,11 @@ class InputMeasures:
     :mod:`prsm_health.estimation.motion_torque`; None: not yet).
     out_of_range_by_field: the samples rejected as out of range, by the field beyond its range
     (one sample may count for several; :data:`OUT_OF_RANGE_FIELDS`; empty: not known). Only
-    the speed noise is saved with the state.
+    the noises are saved with the state.
     """
 
     speed_noise_std_rad_s: float | None = None
+    current_noise_std_a: float | None = None
     position_per_speed: float | None = None
     torque_along_motion_nm: tuple[float | None, float | None] = (None, None)
     out_of_range_by_field: Mapping[str, int] = field(default_factory=dict)
@@ -304,6 +305,7 @@ class SampleBlocker:
         """What has been measured of the inputs so far."""
         return InputMeasures(
             speed_noise_std_rad_s=self.speed_noise.measured_std,
+            current_noise_std_a=self.current_noise.measured_std,
             position_per_speed=self.position_per_speed.ratio,
             torque_along_motion_nm=self.torque_along_motion.medians_nm,
             out_of_range_by_field=dict(self.out_of_range),
