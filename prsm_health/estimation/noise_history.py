@@ -15,11 +15,12 @@ of the variances at 40 samples a block.
 The motor current's, for the current spike check: a current noisier than
 ``noise.current_std_a`` had its tails rejected as spikes (9 % of the samples at ten times
 it). Each block's is measured from its raw samples, before that check, robustly: the median
-absolute second difference (inputs.py).
+magnitude of the second differences two samples apart (inputs.py).
 
 Until HISTORY_BLOCKS blocks have been measured (2.6 s at 40 ms a block) the parameter alone
-sets sigma. The measured variances are part of the estimator's saved state, so a restart
-does not fall back to it.
+sets the speed's sigma; the current's is the median of those measured so far from the
+eighth on (inputs.CURRENT_NOISE_FIRST_BLOCKS). The measured variances are part of the
+estimator's saved state, so a restart does not fall back to it.
 """
 
 from __future__ import annotations
@@ -28,10 +29,11 @@ import numpy as np
 
 from prsm_health.signals import BoolArray, FloatArray, IntArray
 
-#: The blocks whose median is the measured speed variance.
+#: The blocks whose median is the measured variance.
 HISTORY_BLOCKS = 64
-#: A block with fewer samples than this is not measured (its variance has too few degrees of
-#: freedom; at 100 Hz a block holds four samples and the parameter alone sets sigma).
+#: A block with fewer samples (second differences, for the current) than this is not
+#: measured (its variance has too few degrees of freedom; at 100 Hz a block holds four
+#: samples and the parameter alone sets sigma).
 MIN_SAMPLES = 8
 #: The offsets of a block's window from the end of its history.
 WINDOW = np.arange(-HISTORY_BLOCKS, 0)
@@ -75,9 +77,9 @@ class NoiseHistory:
         HISTORY_BLOCKS)."""
         return [float(v) for v in self._history]
 
-    def resume(self, variances_rad2_s2: list[float]) -> None:
+    def resume(self, variances: list[float]) -> None:
         """Continue from :meth:`saved` (checked by the caller: finite, >= 0)."""
-        self._history = np.asarray(variances_rad2_s2[-HISTORY_BLOCKS:], dtype=np.float64)
+        self._history = np.asarray(variances[-HISTORY_BLOCKS:], dtype=np.float64)
 
     def variances(self, block_var: FloatArray, measured: BoolArray) -> FloatArray:
         """The variance to use for each block of a batch, in order, given each block's
