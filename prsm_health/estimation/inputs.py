@@ -490,13 +490,8 @@ class SampleBlocker:
         """
         current = pending.current_a
         x = np.r_[self._previous_current, current, math.nan]
-        before, here, after = x[:-2], x[1:-1], x[2:]
-        with np.errstate(invalid="ignore"):
-            spike_like = (
-                (np.abs(here - before) > spike_a)
-                & (np.abs(here - after) > spike_a)
-                & (np.abs(after - before) < 0.5 * spike_a)
-            )
+        before, here = x[:-2], x[1:-1]
+        spike_like = _off_their_line(x, spike_a, spike_a, 0.5 * spike_a)
         # Spike-like samples that are the middle of five in a row are a ripple, not spikes.
         flags = np.r_[self._previous_spike_like, spike_like, False, False]
         spikes = spike_like
@@ -576,13 +571,7 @@ class SampleBlocker:
         advancing = steps_s > 0.0
         reach = np.full(len(steps_s), np.inf)
         reach[advancing] = self._max_acceleration * steps_s[advancing] + self._spike_rad_s
-        before, here, after = w[:-2], w[1:-1], w[2:]
-        with np.errstate(invalid="ignore"):
-            return np.asarray(
-                (np.abs(here - before) > reach[:-1])
-                & (np.abs(here - after) > reach[1:])
-                & (np.abs(after - before) < reach[:-1] + reach[1:])
-            )
+        return _off_their_line(w, reach[:-1], reach[1:], reach[:-1] + reach[1:])
 
     def _blocks(
         self, pending: MotorSamples, rejected_before: Counts, *, final: bool
@@ -804,6 +793,25 @@ class SampleBlocker:
         offset = self._position_turns_rad + 2.0 * math.pi * np.cumsum(turns)
         self._position_turns_rad = float(offset[-1])
         return wrapped, np.asarray(run.position_rad - offset, dtype=np.float64)
+
+
+def _off_their_line(
+    x: FloatArray,
+    beyond_before: FloatArray | float,
+    beyond_after: FloatArray | float,
+    agree_within: FloatArray | float,
+) -> BoolArray:
+    """Per value of ``x`` but its first and last (the context: a NaN is never beside one):
+    further than ``beyond_before`` from the value before it and ``beyond_after`` from the one
+    after it, which are within ``agree_within`` of each other. One value off the line its
+    neighbours agree on: a spike."""
+    before, here, after = x[:-2], x[1:-1], x[2:]
+    with np.errstate(invalid="ignore"):
+        return np.asarray(
+            (np.abs(here - before) > beyond_before)
+            & (np.abs(here - after) > beyond_after)
+            & (np.abs(after - before) < agree_within)
+        )
 
 
 def _variance_about_trend(

@@ -419,7 +419,9 @@ class EstimatorParams:
         if self.filter.max_acceleration_rad_s2 > 0.0:
             return self.filter.max_acceleration_rad_s2
         drive = self.actuator.drive_train
-        load_n = self.model.plausible_load_factor * self.load_scale_n or self.diverged_load_n
+        load_n = self.model.plausible_load_factor * self.load_scale_n
+        if load_n == 0.0:  # no load bound
+            load_n = self.diverged_load_n
         lead_m = self.actuator.preset.geometry.lead_m
         load_torque_nm = load_n * lead_m / (2.0 * math.pi) / drive.gear_ratio
         motor_torque_nm = drive.max_current_a * drive.torque_constant_nm_per_a
