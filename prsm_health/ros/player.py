@@ -28,7 +28,7 @@ topics with and without one: a topic nothing reads, e.g. ``/truth/state``, is le
 ``topics``), then
 :data:`SETTLE_S` more so that the subscriber side of discovery completes too: a best-effort
 subscriber drops what arrives before it has matched the publisher. At the end the player
-waits for reliable subscribers to acknowledge everything (at most ``ACK_TIMEOUT_S``), so a
+waits for reliable subscribers to acknowledge everything (at most ``FINAL_ACK_TIMEOUT_S``), so a
 short bag is not cut off, and reports the topics they did not; best-effort subscribers are not
 waited for.
 """
@@ -62,10 +62,17 @@ from prsm_health.ros.runtime import message_class
 #: After the publishers have matched their subscribers, time for the subscribers to match
 #: the publishers [s].
 SETTLE_S = 0.3
-#: How long the player waits for reliable subscribers' acknowledgements [s], at the end of
-#: the play and for a message held back by a full history (module docstring): Fast DDS
-#: repairs a lost message at its heartbeat (every 3 s), later on a starved machine.
+#: How long a message held back by a full history waits for a reliable subscriber to take
+#: one [s] (module docstring): Fast DDS repairs a lost message at its heartbeat (every 3 s),
+#: later on a starved machine.
 ACK_TIMEOUT_S = 10.0
+#: How long the player waits at the end (after Ctrl-C too) for reliable subscribers to
+#: acknowledge everything [s]. Up to the 5,000 messages Fast DDS holds may be outstanding
+#: then: a node stopped for a second while a play at 50 kHz held them needed
+#: 5.4-11.6 s after it went on (six runs, 2026-11-29, its lost packets repaired at the
+#: heartbeats), and at ACK_TIMEOUT_S, the wait until then, one play in three exited before,
+#: its messages lost. A stopped subscriber ends the play after this long.
+FINAL_ACK_TIMEOUT_S = 30.0
 NS_PER_S = 1e9
 #: The speed factors played [-]: at the slowest a second of bag lasts 1000 s (17 min), slower
 #: is no playback anyone watches (and a far slower one overflowed the wait); at the fastest a
@@ -180,12 +187,14 @@ def _no_subscriber(topics: list[str], missing: list[str], timeout_s: float) -> s
     return text
 
 
-def _has_reliable_subscriber(node: Any, topic: str) -> bool:
-    """Some subscriber of ``topic`` is reliable (a best-effort one acknowledges nothing)."""
-    return any(
-        info.qos_profile.reliability == QoSReliabilityPolicy.RELIABLE
+def _reliable_subscribers(node: Any, topic: str) -> set[tuple[int, ...]]:
+    """The reliable subscribers of ``topic``, by endpoint GID (a best-effort one acknowledges
+    nothing)."""
+    return {
+        tuple(info.endpoint_gid)
         for info in node.get_subscriptions_info_by_topic(topic)
-    )
+        if info.qos_profile.reliability == QoSReliabilityPolicy.RELIABLE
+    }
 
 
 @dataclass(frozen=True)
@@ -332,12 +341,10 @@ def play(
             report.passes += 1
             if not options.loop or report.damage is not None:
                 break
-        report.interrupted = stop.is_set()
         for topic, publisher in publishers.items():
-            if not _has_reliable_subscriber(node, topic):
-                continue
-            if not publisher.wait_for_all_acked(Duration(seconds=ACK_TIMEOUT_S)):
+            if not _acknowledged(node, topic, publisher):
                 report.unacknowledged.append(topic)
+        report.interrupted = stop.is_set()
         return report
     finally:
         node.destroy_node()
@@ -378,6 +385,29 @@ def _one_pass(
         report.published[topic] += 1
         if stop.is_set():
             return
+
+
+def _acknowledged(node: Any, topic: str, publisher: Any) -> bool:
+    """Whether every reliable subscriber of ``topic`` acknowledged all ``publisher`` published
+    within FINAL_ACK_TIMEOUT_S and is still there: Fast DDS drops a subscriber whose
+    participant stops answering when its lease runs out (20 s), and the wait then ends as if
+    it had acknowledged (a stopped node's 3,000 messages were reported taken). Waited for
+    after Ctrl-C too, as what was published before it. True without a reliable subscriber:
+    there is none to wait for."""
+    waited_for = _reliable_subscribers(node, topic)
+    deadline = time.monotonic() + FINAL_ACK_TIMEOUT_S
+    while waited_for:
+        left_s = deadline - time.monotonic()
+        if left_s <= 0.0:
+            return False
+        acknowledged = publisher.wait_for_all_acked(Duration(seconds=min(1.0, left_s)))
+        if acknowledged:
+            time.sleep(SETTLE_S)  # the graph follows a subscriber dropped from the match
+        if not waited_for <= _reliable_subscribers(node, topic):
+            return False
+        if acknowledged:
+            return True
+    return True
 
 
 def _publish_held_back(publisher: Any, raw: bytes, stop: threading.Event) -> bool:

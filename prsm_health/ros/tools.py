@@ -133,8 +133,8 @@ def _run_play(args: argparse.Namespace) -> int:
     damage printed at the end); else EXIT_INTERRUPTED if stopped by SIGINT/SIGTERM. A
     ``--clock-rate`` without ``--clock`` is a usage error."""
     from prsm_health.ros.player import (
-        ACK_TIMEOUT_S,
         DEFAULT_CLOCK_RATE_HZ,
+        FINAL_ACK_TIMEOUT_S,
         PlayError,
         PlayInputError,
         PlayOptions,
@@ -172,7 +172,8 @@ def _run_play(args: argparse.Namespace) -> int:
     if report.unacknowledged:
         print(
             f"prsm-health play: error: not acknowledged by every reliable subscriber within"
-            f" {ACK_TIMEOUT_S:g} s: {', '.join(report.unacknowledged)} (messages may be lost)",
+            f" {FINAL_ACK_TIMEOUT_S:g} s, or one left: {', '.join(report.unacknowledged)}"
+            " (messages may be lost)",
             file=sys.stderr,
         )
     damaged = report.damage is not None and not report.interrupted  # stopped before it
