@@ -32,6 +32,11 @@ from rclpy.qos import QoSProfile, QoSReliabilityPolicy
 from prsm_health.ros.monitor import diagnostics_record, health_record
 
 STOP_TIMEOUT_S = 15.0
+#: After a fresh client finds its service, time for the server to match the client's response
+#: reader [s] before the request: rmw_fastrtps drops a response whose reader it has not
+#: matched within 100 ms (ros2/rmw_fastrtps#390, #467), and in CI on 2026-11-29 a get_state
+#: sent as soon as wait_for_service returned went unanswered for 10 s.
+SERVICE_SETTLE_S = 0.5
 TRANSITIONS = {
     "configure": Transition.TRANSITION_CONFIGURE,
     "activate": Transition.TRANSITION_ACTIVATE,
@@ -198,6 +203,7 @@ class Listener:
         client = self.node.create_client(service_type, f"/{self.node_name}/{service}")
         try:
             assert client.wait_for_service(timeout_sec=timeout_s), f"no service {service}"
+            self.spin(SERVICE_SETTLE_S)
             future = client.call_async(request)
             self.executor.spin_until_future_complete(future, timeout_sec=timeout_s)
             assert future.done(), f"no answer from {service}"
