@@ -104,7 +104,8 @@ class HealthEstimator:
     @property
     def input_measures(self) -> InputMeasures:
         """What the input stage has measured of the inputs so far (:class:`InputMeasures`; its
-        speed noise is used where larger than ``noise.speed_std_rad_s``)."""
+        noises are used where larger than ``noise.speed_std_rad_s`` and
+        ``noise.current_std_a``)."""
         return self._blocker.measures()
 
     @property
@@ -141,7 +142,8 @@ class HealthEstimator:
         """Everything needed to resume after a restart, as plain JSON-able data.
 
         The hypotheses' filter states, ripple axes and probabilities, the accumulated
-        degradation, the input counters, the speed noise measured in motion, and fingerprints
+        degradation, the input counters, the noises the input stage measured (the speed's
+        in motion, the current's), and fingerprints
         of the screw and of the rest of the actuator (:meth:`restore` says what it does with
         them).
         """

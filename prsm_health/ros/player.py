@@ -395,8 +395,11 @@ def _acknowledged(node: Any, topic: str, publisher: Any) -> bool:
     after Ctrl-C too, as what was published before it. True without a reliable subscriber:
     there is none to wait for."""
     waited_for = _reliable_subscribers(node, topic)
+    if not waited_for:
+        return True
     deadline = time.monotonic() + FINAL_ACK_TIMEOUT_S
-    while waited_for:
+    acknowledged = False
+    while not acknowledged:
         left_s = deadline - time.monotonic()
         if left_s <= 0.0:
             return False
@@ -405,8 +408,6 @@ def _acknowledged(node: Any, topic: str, publisher: Any) -> bool:
             time.sleep(SETTLE_S)  # the graph follows a subscriber dropped from the match
         if not waited_for <= _reliable_subscribers(node, topic):
             return False
-        if acknowledged:
-            return True
     return True
 
 
