@@ -27,7 +27,7 @@ from prsm_health.bags.bagfiles import bag_files
 from prsm_health.bags.reader import joint_names
 from prsm_health.bags.topics import MOTOR_FRAME
 from prsm_health.estimation.estimate import UM_PER_M
-from prsm_health.estimation.inputs import CURRENT_NOISE_FIRST_BLOCKS, RejectReason
+from prsm_health.estimation.inputs import RejectReason
 from prsm_health.estimation.metrics import Metrics
 from prsm_health.estimation.motion_torque import against_motion
 from prsm_health.estimation.noise_history import HISTORY_BLOCKS
@@ -38,6 +38,7 @@ from prsm_health.estimation.params import (
     params_from_mapping,
 )
 from prsm_health.estimation.position_speed import disagreement
+from prsm_health.estimation.sample_faults import CURRENT_NOISE_FIRST_BLOCKS
 from prsm_health.interrupt import (
     EXIT_INTERRUPTED,
     remove_output,

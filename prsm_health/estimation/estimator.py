@@ -216,7 +216,7 @@ class HealthEstimator:
     def _blocker_noises(self) -> zip[tuple[str, NoiseHistory]]:
         """The noises the input stage measures, with their snapshot keys."""
         blocker = self._blocker
-        return zip(NOISE_KEYS, (blocker.speed_noise, blocker.current_noise), strict=True)
+        return zip(NOISE_KEYS, (blocker.speed_noise, blocker.faults.current_noise), strict=True)
 
     def reset_after_maintenance(
         self, jammed_rollers: int, *, reset_precision_loss: bool, reset_fatigue_damage: bool

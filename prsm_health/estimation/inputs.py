@@ -3,7 +3,8 @@
 Every sample is checked and either accepted or rejected with a reason that is counted (never
 silently dropped): non-finite values, values out of the drive's range or a stamp beyond
 LARGEST_STAMP_S, a time stamp not after the last accepted one, an isolated spike in the
-current or the speed, or a current stuck at one value.
+current or the speed, or a current stuck at one value (those two need each sample's
+neighbours: sample_faults.py, on complete blocks).
 Accepted samples are grouped into blocks of ``filter.block_duration_s`` on a fixed time grid;
 each block becomes one filter measurement (:class:`Block`). Everything is vectorised over the
 samples of a chunk; only chunks with time going backwards take a per-sample path.
@@ -36,6 +37,7 @@ from prsm_health.estimation.motion_torque import TorqueAlongMotion
 from prsm_health.estimation.noise_history import MIN_SAMPLES, NoiseHistory
 from prsm_health.estimation.params import EstimatorParams
 from prsm_health.estimation.position_speed import PositionPerSpeed
+from prsm_health.estimation.sample_faults import STUCK_RUN_SAMPLES, SampleFaults
 from prsm_health.physics.meshing import carrier_speed_rad_s
 from prsm_health.signals import BoolArray, FloatArray, IntArray, MotorSamples
 
@@ -43,26 +45,9 @@ from prsm_health.signals import BoolArray, FloatArray, IntArray, MotorSamples
 #: rejection among the pending samples; spares the node's one-sample calls three array ops).
 Counts = IntArray | int
 
-#: A current sample this many noise standard deviations away from both neighbours, which
-#: agree with each other, is a spike (the noise measured, SampleBlocker._current_spike_a); a
-#: speed sample is one this many beyond what the motor can accelerate in the time between
-#: (SampleBlocker._speed_spikes).
-SPIKE_SIGMAS = 12.0
-#: The median magnitude of a second difference of white noise of standard deviation sigma
-#: (x[i + 2] - 2 x[i] + x[i - 2]), over sigma: the difference has the standard deviation
-#: sqrt(6) sigma, and the median of a normal magnitude is 0.6745 of its standard deviation.
-MEDIAN_SECOND_DIFFERENCE_SIGMAS = 0.6745 * math.sqrt(6.0)
-#: The current's noise is measured once this many blocks are (0.32 s at 40 ms), not only
-#: from HISTORY_BLOCKS on as the speed's: until then ten times the parameter's noise had 9 %
-#: of its samples rejected as spikes. Each block's estimate is within about 25 %, the median
-#: of eight within about 10 %, far inside the spike threshold's margin.
-CURRENT_NOISE_FIRST_BLOCKS = 8
 #: Two consecutive motor positions within this [rad] of zero that differ by more than half a
 #: turn show that the positions wrap into one turn: from then on no travel is taken from them.
 WRAPPED_WITHIN_RAD = 2.0 * math.pi
-#: This many identical consecutive current samples (while the noise should vary them) are a
-#: stuck sensor; all of them are rejected (blocks close this many samples late for it).
-STUCK_RUN_SAMPLES = 20
 #: A block holds at most ``filter.block_duration_s`` times this many samples (beyond any
 #: drive's rate; 10,000 in the default 40 ms): with stamps that hardly advance (a clock in the
 #: wrong unit) a block would never end, and the samples pending for it grew without bound
@@ -243,8 +228,8 @@ class SampleBlocker:
 
     The result does not depend on how the samples are chunked (one at a time in the node,
     thousands at a time in replay): per-sample checks carry their state, and the checks that
-    need neighbours (spikes, stuck runs) run on complete blocks with one sample of context on
-    each side.
+    need neighbours (spikes, stuck runs: :attr:`faults`) run on complete blocks with one
+    sample of context on each side.
     """
 
     def __init__(self, params: EstimatorParams) -> None:
@@ -261,8 +246,6 @@ class SampleBlocker:
             params.max_motor_speed_rad_s,
             LARGEST_POSITION_RAD,
         )
-        self._spike_rad_s = SPIKE_SIGMAS * params.noise.speed_std_rad_s
-        self._max_acceleration = params.max_motor_acceleration_rad_s2
         #: The most samples a block holds (MAX_SAMPLE_RATE_HZ).
         self.block_capacity = math.ceil(params.filter.block_duration_s * MAX_SAMPLE_RATE_HZ)
         self.counters = InputCounters()
@@ -288,16 +271,8 @@ class SampleBlocker:
         self._position_turns_rad = 0.0  # the whole turns taken off them so far (unwrapped)
         self._last_processed_stamp = math.inf  # the last one of a block, rejected or not
         self._time_reset = False
-        self._previous_current = math.nan  # last sample before the pending ones
-        # Whether the last two samples before the pending ones stood out from both neighbours.
-        self._previous_spike_like = np.zeros(2, dtype=np.bool_)
-        self._stuck_run = 0  # length of the identical-current run ending there
-        self._previous_speed = math.nan  # the speed and stamp of that last sample
-        self._previous_speed_stamp = math.nan
+        self.faults = SampleFaults(params)
         self.speed_noise = NoiseHistory(params.noise.speed_std_rad_s)
-        self.current_noise = NoiseHistory(
-            params.noise.current_std_a, first_blocks=CURRENT_NOISE_FIRST_BLOCKS
-        )
         self.position_per_speed = PositionPerSpeed()
         self.torque_along_motion = TorqueAlongMotion()
 
@@ -305,7 +280,7 @@ class SampleBlocker:
         """What has been measured of the inputs so far."""
         return InputMeasures(
             speed_noise_std_rad_s=self.speed_noise.measured_std,
-            current_noise_std_a=self.current_noise.measured_std,
+            current_noise_std_a=self.faults.current_noise.measured_std,
             position_per_speed=self.position_per_speed.ratio,
             torque_along_motion_nm=self.torque_along_motion.medians_nm,
             out_of_range_by_field=dict(self.out_of_range),
@@ -470,109 +445,6 @@ class SampleBlocker:
             self.counters.rejected[RejectReason.TIME_BACKWARDS] += 1
         return keep, resets, jumped
 
-    # --- checks on complete blocks ------------------------------------------------------
-    def _spikes_and_stuck(
-        self, pending: MotorSamples, spike_a: FloatArray, processed: int, final: bool
-    ) -> BoolArray:
-        """Rejection mask of the first ``processed`` of the ``pending`` samples.
-
-        Spikes: speed spikes (:meth:`_speed_spikes`), and currents further than ``spike_a``
-        (per pending sample) from both neighbours, which agree within half of it (the context
-        at either end is the neighbouring sample, or NaN: never a spike), unless they are the
-        middle of five such in a row: a current alternating every sample by more than the
-        threshold, a ripple aliased at the sampling frequency, was rejected nearly whole (a
-        review session); only its first and last two samples are now. Two spikes two samples
-        apart are three such samples (the one between stands out too), all rejected. Stuck: every
-        sample of a run of at least STUCK_RUN_SAMPLES identical values. Blocks are closed
-        only STUCK_RUN_SAMPLES samples before the end of what is pending (unless ``final``),
-        so any run that reaches into the unprocessed tail is already long enough to be judged,
-        and a whole stuck run is rejected, its first samples included.
-        """
-        current = pending.current_a
-        x = np.r_[self._previous_current, current, math.nan]
-        before, here = x[:-2], x[1:-1]
-        spike_like = _off_their_line(x, spike_a, spike_a, 0.5 * spike_a)
-        # Spike-like samples that are the middle of five in a row are a ripple, not spikes.
-        flags = np.r_[self._previous_spike_like, spike_like, False, False]
-        spikes = spike_like
-        if spike_like.any():
-            ripple = flags[:-4] & flags[1:-3] & flags[2:-2] & flags[3:-1] & flags[4:]
-            spikes = spike_like & ~ripple
-        spikes = spikes | self._speed_spikes(pending)
-        run_ids = np.cumsum(here != before)  # run 0 continues the run before the pending ones
-        lengths = np.bincount(run_ids)
-        lengths[0] += self._stuck_run
-        open_ended = run_ids == run_ids[-1]
-        stuck = lengths[run_ids] >= STUCK_RUN_SAMPLES
-        if not final:  # the last run may go on: judged once it is long enough
-            stuck &= ~open_ended | (lengths[run_ids[-1]] >= STUCK_RUN_SAMPLES)
-        if processed:
-            last = run_ids[processed - 1]
-            self._stuck_run = int(np.count_nonzero(run_ids[:processed] == last)) + (
-                self._stuck_run if last == 0 else 0
-            )
-            self._previous_current = float(current[processed - 1])
-            self._previous_spike_like = flags[processed : processed + 2].copy()
-            self._previous_speed = float(pending.speed_rad_s[processed - 1])
-            self._previous_speed_stamp = float(pending.stamp_s[processed - 1])
-        spikes, stuck = spikes[:processed], stuck[:processed]
-        self._count(RejectReason.SPIKE, spikes)
-        self._count(RejectReason.STUCK, stuck & ~spikes)
-        return np.asarray(spikes | stuck)
-
-    def _current_spike_a(self, current: FloatArray, starts: IntArray, end: int) -> FloatArray:
-        """Per sample of ``current`` (the pending ones): the current spike threshold,
-        SPIKE_SIGMAS times the current noise known before its block (``starts``: the first
-        sample of each complete block, which end at ``end``; the samples after ``end`` take
-        the noise known after the last). Each block's noise is measured from its samples,
-        before the check, robustly: the median magnitude of their second differences two
-        samples apart, over MEDIAN_SECOND_DIFFERENCE_SIGMAS (a spike or a step moves a few
-        of them, a smooth change hardly any, and a current alternating every sample, a ripple
-        aliased at the sampling frequency, none: it is no noise that would hide spikes),
-        measured on blocks of at least MIN_SAMPLES such differences, and
-        taken as NoiseHistory does the speed's (never below ``noise.current_std_a``). A
-        current noisier than the parameter had its tails rejected as spikes: 0.5 % of the
-        samples at four times it, 9 % at ten times."""
-        counts = np.diff(np.r_[starts, end])
-        block_of = np.repeat(np.arange(len(starts)), counts)
-        inside = block_of[:-4] == block_of[4:]  # a sample and both others in one block
-        x = current[:end]
-        magnitude = np.abs(x[4:] - 2.0 * x[2:-2] + x[:-4])[inside]
-        owner = block_of[2:-2][inside]
-        per_block = np.bincount(owner, minlength=len(starts))
-        variances = np.zeros(len(starts))
-        if len(magnitude):
-            ordered = magnitude[np.lexsort((magnitude, owner))]
-            first = np.cumsum(per_block) - per_block
-            low = np.minimum(first + (per_block - 1) // 2, len(ordered) - 1)
-            high = np.minimum(first + per_block // 2, len(ordered) - 1)
-            median = 0.5 * (ordered[low] + ordered[high])
-            variances = (median / MEDIAN_SECOND_DIFFERENCE_SIGMAS) ** 2
-        before, after = self.current_noise.variances_before(variances, per_block >= MIN_SAMPLES)
-        variance = np.r_[np.repeat(before, counts), np.full(len(current) - end, after)]
-        return np.asarray(SPIKE_SIGMAS * np.sqrt(variance))
-
-    def _speed_spikes(self, pending: MotorSamples) -> BoolArray:
-        """Per pending sample: a speed further from both neighbours than the motor can change
-        its speed in the time between (``EstimatorParams.max_motor_acceleration_rad_s2``
-        times it, plus SPIKE_SIGMAS of ``noise.speed_std_rad_s``), while the neighbours are
-        within the sum of those two bounds of each other. No motion goes there and back: the
-        sample is wrong (one at -500 rad/s in a stroke made its block a reversal, and the load
-        was forgotten). The bound is the drive's, not the speed noise's: a coarse encoder
-        differenced into the speed steps by a count per sample (6 rad/s at 1024 counts and
-        1 kHz), which only the noise measured in motion, not yet there at the start, would
-        allow for. Between samples stamped less than 20 us apart (stamps batched on receipt)
-        such steps exceed it and are rejected, counted. The context at either end is as for
-        the current; across a time reset or a stamp that did not advance (never between
-        accepted samples of one time line) no bound applies."""
-        w = np.r_[self._previous_speed, pending.speed_rad_s, math.nan]
-        steps_s = np.diff(np.r_[self._previous_speed_stamp, pending.stamp_s, math.nan])
-        # A NaN step (no neighbour) compares False: no bound, never a spike.
-        advancing = steps_s > 0.0
-        reach = np.full(len(steps_s), np.inf)
-        reach[advancing] = self._max_acceleration * steps_s[advancing] + self._spike_rad_s
-        return _off_their_line(w, reach[:-1], reach[1:], reach[:-1] + reach[1:])
-
     def _blocks(
         self, pending: MotorSamples, rejected_before: Counts, *, final: bool
     ) -> list[Block]:
@@ -615,8 +487,10 @@ class SampleBlocker:
         self._last_processed_stamp = float(t[end - 1])
         run = pending[:end]
         accepted_earlier, rejected_earlier = self.counters.accepted, self._rejected(IN_BLOCKS)
-        spike_a = self._current_spike_a(pending.current_a, starts[:complete], end)
-        rejected = self._spikes_and_stuck(pending, spike_a, end, final)
+        spikes, stuck = self.faults.find(pending, starts[:complete], end, final)
+        self._count(RejectReason.SPIKE, spikes)
+        self._count(RejectReason.STUCK, stuck)
+        rejected = spikes | stuck
         self.counters.accepted += end - int(np.count_nonzero(rejected))
         self._pending = pending[end:]
         self._pending_rejected_before = _compact(_at(rejected_before, slice(end, None)))
@@ -793,25 +667,6 @@ class SampleBlocker:
         offset = self._position_turns_rad + 2.0 * math.pi * np.cumsum(turns)
         self._position_turns_rad = float(offset[-1])
         return wrapped, np.asarray(run.position_rad - offset, dtype=np.float64)
-
-
-def _off_their_line(
-    x: FloatArray,
-    beyond_before: FloatArray | float,
-    beyond_after: FloatArray | float,
-    agree_within: FloatArray | float,
-) -> BoolArray:
-    """Per value of ``x`` but its first and last (the context: a NaN is never beside one):
-    further than ``beyond_before`` from the value before it and ``beyond_after`` from the one
-    after it, which are within ``agree_within`` of each other. One value off the line its
-    neighbours agree on: a spike."""
-    before, here, after = x[:-2], x[1:-1], x[2:]
-    with np.errstate(invalid="ignore"):
-        return np.asarray(
-            (np.abs(here - before) > beyond_before)
-            & (np.abs(here - after) > beyond_after)
-            & (np.abs(after - before) < agree_within)
-        )
 
 
 def _variance_about_trend(

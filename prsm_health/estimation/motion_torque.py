@@ -4,7 +4,7 @@ direction, measured in motion.
 Each moving block of two samples or more gives its mean motor torque k_t i times its
 direction of motion, d T [N·m] (positive: the motor drives the motion, negative: it brakes
 it). The value reported per direction is the median of that direction's last
-``speed_noise.HISTORY_BLOCKS`` blocks (recent_median.py). The friction of the screw always
+``noise_history.HISTORY_BLOCKS`` blocks (recent_median.py). The friction of the screw always
 resists the motion (002 eq. 12-19), so the motor drives it at least in one direction: a load
 that resists the motion (the downhole traction, 000 section 5) makes both positive, one that
 keeps its direction (a weight lifted and lowered) one positive and one negative. Both

@@ -1,5 +1,6 @@
 """A sensor's noise measured block by block: the median of the last HISTORY_BLOCKS measured
-blocks' variances, never below the parameter's. The input stage (inputs.py) keeps two.
+blocks' variances, never below the parameter's. The input stage keeps two: the speed's
+(inputs.py) and the current's (sample_faults.py).
 
 The motor speed's, for the variance of each block's acceleration: a block's acceleration is
 its speed change over its span, with the variance 2 sigma^2 / span^2 of the difference of
@@ -15,11 +16,11 @@ of the variances at 40 samples a block.
 The motor current's, for the current spike check: a current noisier than
 ``noise.current_std_a`` had its tails rejected as spikes (9 % of the samples at ten times
 it). Each block's is measured from its raw samples, before that check, robustly: the median
-magnitude of the second differences two samples apart (inputs.py).
+magnitude of the second differences two samples apart (sample_faults.py).
 
 Until HISTORY_BLOCKS blocks have been measured (2.6 s at 40 ms a block) the parameter alone
 sets the speed's sigma; the current's is the median of those measured so far from the
-eighth on (inputs.CURRENT_NOISE_FIRST_BLOCKS). The measured variances are part of the
+eighth on (sample_faults.CURRENT_NOISE_FIRST_BLOCKS). The measured variances are part of the
 estimator's saved state, so a restart does not fall back to it.
 """
 

@@ -50,7 +50,7 @@ class NoiseParams:
 
     current_std_a: white noise of one current sample. speed_std_rad_s: of one motor speed
     sample, at least: the estimator measures the speed's noise in motion and takes the larger
-    (:mod:`prsm_health.estimation.speed_noise`). model_error_rel: relative error of the torque
+    (:mod:`prsm_health.estimation.noise_history`). model_error_rel: relative error of the torque
     model (surrogate, unmodelled harmonics, radial load unknown), added to the measurement
     variance of each block.
     model_error_floor_nm: absolute floor of that error, motor side.
@@ -197,7 +197,7 @@ class FilterParams:
     max_speed_rad_s: motor speeds beyond it are out of range (rejected). Default 0 means
     three times the preset's largest speed. max_acceleration_rad_s2: the motor's speed
     cannot change faster; a speed sample further from both its neighbours than that allows
-    is a spike (rejected; inputs.py). Default 0 means from the drive train
+    is a spike (rejected; sample_faults.py). Default 0 means from the drive train
     (EstimatorParams.max_motor_acceleration_rad_s2).
     """
 

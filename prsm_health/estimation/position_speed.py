@@ -4,7 +4,7 @@ travel the speed says, measured in motion.
 Each moving block of two samples or more gives the ratio of its position change (first to
 last sample, the turns of wrapped positions added: inputs.py) to the travel its speeds say
 (their trapezoidal integral over the same samples). The ratio reported is the median of the
-last ``speed_noise.HISTORY_BLOCKS`` of them: 1 when both are of the motor shaft, in radians.
+last ``noise_history.HISTORY_BLOCKS`` of them: 1 when both are of the motor shaft, in radians.
 A position in degrees reads 57.3, in turns 0.159; a position of the screw's reads one over
 the gear ratio, a speed of the screw's the gear ratio; a position or speed of the other sign
 -1. Nothing else checks such a mistake, and the estimator runs on with it: on the sudden-jam

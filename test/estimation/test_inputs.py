@@ -12,9 +12,7 @@ import pytest
 from prsm_health.actuator import Actuator
 from prsm_health.estimation.estimator import HealthEstimator
 from prsm_health.estimation.inputs import (
-    CURRENT_NOISE_FIRST_BLOCKS,
     LARGEST_STAMP_S,
-    STUCK_RUN_SAMPLES,
     TIME_RESET_SAMPLES,
     Block,
     RejectReason,
@@ -23,6 +21,7 @@ from prsm_health.estimation.inputs import (
 )
 from prsm_health.estimation.noise_history import HISTORY_BLOCKS
 from prsm_health.estimation.params import EstimatorParams
+from prsm_health.estimation.sample_faults import CURRENT_NOISE_FIRST_BLOCKS, STUCK_RUN_SAMPLES
 from prsm_health.physics.meshing import carrier_speed_rad_s
 from prsm_health.physics.presets import load_preset
 from prsm_health.signals import MotorSamples
@@ -233,7 +232,7 @@ def test_a_current_noisier_than_its_parameter_is_measured_not_taken_for_spikes(s
     spike = int(np.argmin([abs(b.stamp_s - samples.stamp_s[5020]) for b in blocks]))
     assert rejected[CURRENT_NOISE_FIRST_BLOCKS - 1 :].sum() == 1 and rejected[spike - 1] == 1
     assert blocker.counters.rejected_total == blocker.counters.rejected[RejectReason.SPIKE]
-    assert blocker.current_noise.measured_std == pytest.approx(0.5, rel=0.1)
+    assert blocker.faults.current_noise.measured_std == pytest.approx(0.5, rel=0.1)
 
 
 @pytest.mark.parametrize("size", [1, 9, 1000])

@@ -87,11 +87,11 @@ def test_the_measured_current_noise_survives_a_restart() -> None:
     samples.current_a[:] += np.random.default_rng(12).normal(0.0, 0.5, len(samples))
     first = HealthEstimator(params())
     first.process(samples)
-    measured = first._blocker.current_noise.measured_std
+    measured = first._blocker.faults.current_noise.measured_std
     assert measured == pytest.approx(0.5, rel=0.15)
     resumed = HealthEstimator(params())
     resumed.restore(json.loads(json.dumps(first.snapshot())))
-    assert resumed._blocker.current_noise.measured_std == measured
+    assert resumed._blocker.faults.current_noise.measured_std == measured
 
 
 def test_a_state_of_another_screw_is_refused_as_foreign_unless_damaged() -> None:
