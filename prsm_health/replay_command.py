@@ -38,7 +38,7 @@ from prsm_health.estimation.params import (
     params_from_mapping,
 )
 from prsm_health.estimation.position_speed import disagreement
-from prsm_health.estimation.sample_faults import CURRENT_NOISE_FIRST_BLOCKS
+from prsm_health.estimation.sample_faults import CURRENT_NOISE_BLOCK_SAMPLES
 from prsm_health.interrupt import (
     EXIT_INTERRUPTED,
     remove_output,
@@ -380,7 +380,7 @@ def _current_noise(result: ReplayResult) -> str:
     """The current's noise the input stage measured (its spike threshold's), or why not."""
     noise = result.measures.current_noise_std_a
     if noise is None:
-        return f"current noise not measured (under {CURRENT_NOISE_FIRST_BLOCKS} blocks)"
+        return f"current noise not measured (no block of {CURRENT_NOISE_BLOCK_SAMPLES} samples)"
     return f"current noise {noise:.3f} A"
 
 

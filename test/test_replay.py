@@ -902,7 +902,7 @@ def test_the_summary_says_what_was_not_measured_and_inputs_that_disagree(
     result = replay(bag, params())
     unmeasured = dataclasses.replace(result, measures=InputMeasures())
     text = replay_command.summary(bag, "x", unmeasured)
-    assert "gaps 0; current noise not measured (under 8 blocks)\n" in text
+    assert "gaps 0; current noise not measured (no block of 12 samples)\n" in text
     assert (
         "  inputs in motion: speed noise not measured (under 64 blocks in motion); position and "
         "speed not compared (under 64 blocks in motion); torque along the motion not measured "

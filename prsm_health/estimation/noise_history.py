@@ -20,7 +20,7 @@ magnitude of the second differences two samples apart (sample_faults.py).
 
 Until HISTORY_BLOCKS blocks have been measured (2.6 s at 40 ms a block) the parameter alone
 sets the speed's sigma; the current's is the median of those measured so far from the
-eighth on (sample_faults.CURRENT_NOISE_FIRST_BLOCKS). The measured variances are part of the
+first on (sample_faults.CURRENT_NOISE_FIRST_BLOCKS). The measured variances are part of the
 estimator's saved state, so a restart does not fall back to it.
 """
 
@@ -91,10 +91,15 @@ class NoiseHistory:
     def variances_before(
         self, block_var: FloatArray, measured: BoolArray
     ) -> tuple[FloatArray, float]:
-        """As :meth:`variances`, from the blocks before each block only; and the variance after
-        the last one (for the samples that follow it)."""
+        """As :meth:`variances`, from the blocks before each block only, but the first block
+        ever measured, which has none before it, from itself where ``first_blocks`` is 1
+        (not from the floor alone: it depends on no other block, so the result still does
+        not depend on the batches); and the variance after the last one (for the samples
+        that follow it)."""
         history, ends = self._extended(block_var, measured)
-        before = self._at(history, np.r_[len(history) - np.count_nonzero(measured), ends])
+        before_ends = np.r_[len(history) - np.count_nonzero(measured), ends]
+        before_ends[:-1][(before_ends[:-1] == 0) & measured] = 1
+        before = self._at(history, before_ends)
         return before[:-1], float(before[-1])
 
     def _extended(self, block_var: FloatArray, measured: BoolArray) -> tuple[FloatArray, IntArray]:

@@ -29,11 +29,16 @@ SPIKE_SIGMAS = 12.0
 #: (x[i + 2] - 2 x[i] + x[i - 2]), over sigma: the difference has the standard deviation
 #: sqrt(6) sigma, and the median of a normal magnitude is 0.6745 of its standard deviation.
 MEDIAN_SECOND_DIFFERENCE_SIGMAS = 0.6745 * math.sqrt(6.0)
-#: The current's noise is measured once this many blocks are (0.32 s at 40 ms), not only
-#: from HISTORY_BLOCKS on as the speed's: until then ten times the parameter's noise had 9 %
-#: of its samples rejected as spikes. Each block's estimate is within about 25 %, the median
-#: of eight within about 10 %, far inside the spike threshold's margin.
-CURRENT_NOISE_FIRST_BLOCKS = 8
+#: The current's noise is measured from the first block on (the median of all the blocks
+#: measured before, the first one judged by its own: NoiseHistory.variances_before), not
+#: only from HISTORY_BLOCKS on as the speed's: ten times the parameter's noise had 9 % of
+#: its samples rejected as spikes with the parameter alone, and 28 in each run's first 0.32 s
+#: with the first eight blocks' median. Each block's estimate is within about 25 %, inside
+#: the spike threshold's margin.
+CURRENT_NOISE_FIRST_BLOCKS = 1
+#: The fewest samples of a block whose current noise is measured: MIN_SAMPLES second
+#: differences two samples apart (none at 100 Hz, four samples a block of 40 ms).
+CURRENT_NOISE_BLOCK_SAMPLES = MIN_SAMPLES + 4
 #: This many identical consecutive current samples (while the noise should vary them) are a
 #: stuck sensor; all of them are rejected (blocks close this many samples late for it).
 STUCK_RUN_SAMPLES = 20

@@ -21,7 +21,7 @@ from prsm_health.estimation.inputs import (
 )
 from prsm_health.estimation.noise_history import HISTORY_BLOCKS
 from prsm_health.estimation.params import EstimatorParams
-from prsm_health.estimation.sample_faults import CURRENT_NOISE_FIRST_BLOCKS, STUCK_RUN_SAMPLES
+from prsm_health.estimation.sample_faults import STUCK_RUN_SAMPLES
 from prsm_health.physics.meshing import carrier_speed_rad_s
 from prsm_health.physics.presets import load_preset
 from prsm_health.signals import MotorSamples
@@ -221,16 +221,19 @@ def test_a_speed_spike_is_what_the_motor_cannot_accelerate_to_and_back() -> None
 @pytest.mark.parametrize("size", [1, 7, 1000])
 def test_a_current_noisier_than_its_parameter_is_measured_not_taken_for_spikes(size: int) -> None:
     """Ten times the parameter's current noise (0.5 A against 0.05): its tails, 12 of the
-    parameter's sigmas but 1.2 of the noise's, were rejected as spikes (9 % of the samples).
-    The noise is measured from the first CURRENT_NOISE_FIRST_BLOCKS blocks on; after them
-    only the one real spike (25 A) is rejected, in any chunks."""
+    parameter's sigmas but 1.2 of the noise's, were rejected as spikes (9 % of the samples),
+    and in the first 0.32 s, before eight blocks were measured, still 28 samples. The noise
+    is measured from the first block on, that block judged by its own: only the real spikes
+    (25 A), one in the first block and one later, are rejected, in any chunks."""
     samples = run(6.0)
     samples.current_a[:] = 5.0 + np.random.default_rng(4).normal(0.0, 0.5, len(samples))
-    samples.current_a[5020] += 25.0
+    samples.current_a[[15, 5020]] += 25.0
     blocks, blocker = feed_in_chunks(samples, size)
-    rejected = np.diff([b.rejected_so_far for b in blocks])  # in each block after the first
-    spike = int(np.argmin([abs(b.stamp_s - samples.stamp_s[5020]) for b in blocks]))
-    assert rejected[CURRENT_NOISE_FIRST_BLOCKS - 1 :].sum() == 1 and rejected[spike - 1] == 1
+    rejected = np.diff([0] + [b.rejected_so_far for b in blocks])  # in each block
+    spikes = [
+        int(np.argmin(np.abs([b.stamp_s - samples.stamp_s[i] for b in blocks]))) for i in (15, 5020)
+    ]
+    assert rejected.sum() == 2 and rejected[spikes].tolist() == [1, 1]
     assert blocker.counters.rejected_total == blocker.counters.rejected[RejectReason.SPIKE]
     assert blocker.faults.current_noise.measured_std == pytest.approx(0.5, rel=0.1)
 

@@ -95,6 +95,21 @@ def test_before_each_block_and_from_the_first_blocks_on() -> None:
     assert NoiseHistory(0.1).variances_before(variances, measured)[1] == pytest.approx(0.01)
 
 
+def test_the_first_block_measured_takes_its_own_variance_from_one_block_on() -> None:
+    """With first_blocks 1 (the current's), the first block measured has none before it and
+    takes its own variance instead of the floor: the floor alone rejected the tails of a
+    current noisier than the parameter in the first block. The blocks after it take those
+    before them; a history resumed from a saved state leaves no block its own."""
+    variances = np.array([1e6, 4.0, 9.0, 16.0])
+    measured = np.array([False, True, True, True])
+    before, after = NoiseHistory(0.1, first_blocks=1).variances_before(variances, measured)
+    assert before.tolist() == [pytest.approx(0.01), 4.0, 4.0, 6.5]
+    assert after == 9.0
+    resumed = NoiseHistory(0.1, first_blocks=1)
+    resumed.resume([4.0])
+    assert resumed.variances_before(np.array([1e6]), np.array([True]))[0].tolist() == [4.0]
+
+
 def test_a_coarse_encoders_speed_noise_is_measured_not_taken_from_the_parameter() -> None:
     """A drive that differences a 1024-count encoder has about 2 rad/s of speed noise, ten
     times the parameter's 0.2 (docs/performance.md, "The drive's sensors"). After
