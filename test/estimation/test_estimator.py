@@ -204,15 +204,18 @@ def test_a_jam_on_a_reversing_stroke_stays_found_through_the_reversals() -> None
 def test_no_self_locked_count_at_a_load_beyond_the_plausible(
     factor: float, self_locked: bool
 ) -> None:
-    """sudden-jam with supports of 0.5 s (seed 46, the benchmark's envelope): after a short
-    stop a third jam, self-locked at an assisting load near 125 kN (the true one resists
-    at 22 kN), outweighed the true two within seconds: a false jam and 29 % load RMSE.
-    Bounded at 1.5 times the preset's largest load, that hypothesis is dropped."""
+    """sudden-jam with supports of 0.5 s: after a short stop a third jam, self-locked at an
+    assisting load beyond twice the preset's largest (the true one resists), outweighs the
+    true two within seconds: a false jam and 44 % load RMSE. Bounded at 1.5 times the
+    preset's largest load, that hypothesis is dropped. (Seed 40; the benchmark envelope's
+    seed 46, 29 % without the bound, no longer goes there since the block's acceleration
+    takes the median of three samples at each end, 2026-11-29; seeds 43, 47, 48, 50, 54 and
+    57 of the twenty from 40 still do.)"""
     scene = varied_scene(
         "sudden-jam",
         "short-supports",
         profile={"type": "downhole_cycle", "support_s": 0.5},
-        seed=46,
+        seed=40,
     )
     result = simulate(scene)
     params = EstimatorParams(
@@ -465,6 +468,38 @@ def test_a_wild_speed_sample_in_a_stroke_does_not_forget_the_load() -> None:
     stamps = np.array([s.stamp_s for s in states])
     assert abs(np.interp(motor.stamp_s[at], stamps, clean)) > 20e3  # in a loaded stroke
     assert np.max(np.abs(with_spike - clean)) < 0.005 * params.rated_load_n
+
+
+@pytest.mark.parametrize("end", ["first", "last"])
+def test_a_wild_speed_sample_at_a_block_end_moves_neither_the_load_nor_the_count(end: str) -> None:
+    """One speed sample 50 rad/s off at a block's first or last sample in the heaviest stroke,
+    under the spike check's bound (the motor could reach it), so accepted: the block's
+    acceleration takes each end's speed as the median of three samples, and every estimate
+    stays within 0.5 % of the rated load of the run without it, with no jam declared. (Taken
+    from the end samples alone, it was 1,280 rad/s^2 of acceleration and 0.31 N m of inertia
+    torque, which a jam explained: on the sudden-jam bag a false count of 3, 6.5 % of rated
+    load RMSE.)"""
+    scene = scene_from_mapping(downhole(duration_s=12.0))
+    motor = simulate(scene).motor
+    speed = np.abs(motor.speed_rad_s)
+    heaviest = int(np.argmax(np.abs(motor.current_a) * (speed > 0.9 * speed.max())))
+    params = EstimatorParams(actuator=scene.actuator)
+    cells = np.floor((motor.stamp_s - motor.stamp_s[0]) / params.filter.block_duration_s)
+    ends = np.flatnonzero(np.diff(cells)) + (1 if end == "first" else 0)
+    at = int(ends[np.searchsorted(ends, heaviest)])
+    spiked = motor.speed_rad_s.copy()
+    spiked[at] += 50.0
+    results = []
+    for samples in (motor, dataclasses.replace(motor, speed_rad_s=spiked)):
+        estimator = HealthEstimator(params)
+        states = estimator.process(samples) + estimator.finish()
+        assert states[-1].samples_rejected == 0
+        results.append(states)
+    clean, with_spike = ([s.axial_load_n for s in states] for states in results)
+    assert abs(np.interp(motor.stamp_s[at], [s.stamp_s for s in results[0]], clean)) > 20e3
+    assert np.max(np.abs(np.subtract(with_spike, clean))) < 0.005 * params.rated_load_n
+    assert max(s.jam_probabilities[0] for s in results[1]) > 0.99
+    assert min(s.jam_probabilities[0] for s in results[1]) > 0.5
 
 
 def test_a_sensor_clock_jumping_by_decades_is_a_gap_not_a_jam() -> None:

@@ -13,6 +13,7 @@ from prsm_health.actuator import Actuator
 from prsm_health.estimation.estimator import HealthEstimator
 from prsm_health.estimation.inputs import (
     LARGEST_STAMP_S,
+    MEDIAN_OF_THREE_VARIANCE,
     TIME_RESET_SAMPLES,
     Block,
     RejectReason,
@@ -503,16 +504,18 @@ def test_samples_closer_than_a_microsecond_carry_no_acceleration() -> None:
 
 
 def test_the_acceleration_variance_is_that_of_a_speed_difference() -> None:
-    """The block's acceleration is the speed change over its span, so its variance is
-    2 sigma^2 / span^2 (not a least-squares slope's 12 sigma^2 / (n T^2), about n / 6 times
-    smaller): measured over 400 noisy blocks of constant speed, whose noise is the parameter's
-    (sigma: the parameter until HISTORY_BLOCKS blocks are measured, then the larger of it and
-    the measured noise, here within a few per cent of it). A merged block's is that of the
+    """The block's acceleration is the speed change over its span, between the medians of
+    its END_SAMPLES first and last samples, so its variance is 2 v sigma^2 / span^2 with v
+    the variance of a median of three (not a least-squares slope's 12 sigma^2 / (n T^2)):
+    measured over 400 noisy blocks of constant speed, whose noise is the parameter's (sigma:
+    the parameter until HISTORY_BLOCKS blocks are measured, then the larger of it and the
+    measured noise, here within a few per cent of it). A merged block's is that of the
     sample-weighted mean."""
     blocks, _ = feed_in_chunks(run(16.0, seed=4), 500)
     full = [b for b in blocks if b.samples == 40]
     sigma = PARAMS.noise.speed_std_rad_s
-    expected = 2.0 * sigma**2 / 0.039**2  # 40 samples 1 ms apart span 39 ms
+    # 40 samples 1 ms apart: the middle samples of the first and last three are 37 ms apart.
+    expected = 2.0 * MEDIAN_OF_THREE_VARIANCE * sigma**2 / 0.037**2
     first = full[: HISTORY_BLOCKS - 1]
     assert all(b.motor_acceleration_var_rad2_s4 == pytest.approx(expected) for b in first)
     assert all(
