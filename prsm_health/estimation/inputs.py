@@ -37,7 +37,12 @@ from prsm_health.estimation.motion_torque import TorqueAlongMotion
 from prsm_health.estimation.noise_history import MIN_SAMPLES, NoiseHistory
 from prsm_health.estimation.params import EstimatorParams
 from prsm_health.estimation.position_speed import PositionPerSpeed
-from prsm_health.estimation.sample_faults import STUCK_RUN_SAMPLES, SampleFaults
+from prsm_health.estimation.sample_faults import (
+    SPIKE_SIGMAS,
+    STUCK_RUN_SAMPLES,
+    SampleFaults,
+    off_their_line,
+)
 from prsm_health.physics.meshing import carrier_speed_rad_s
 from prsm_health.signals import BoolArray, FloatArray, IntArray, MotorSamples
 
@@ -158,9 +163,10 @@ class Block:
     (:class:`~prsm_health.estimation.noise_history.NoiseHistory`).
     carrier_cos, carrier_sin: means of cos and sin of the carrier angle (exact averaging of
     the carrier-frequency ripple).
-    direction: +1 or -1 when every sample moves that way faster than the standstill speed,
-    else 0 (standstill or reversing). reverses: samples move both ways faster than it (the
-    motion reverses inside the block). current_residual_var_a2: variance of the current about
+    direction: +1 or -1 when every sample moves that way faster than the standstill speed
+    (but wild ones inside the block: SampleBlocker._speed_range), else 0 (standstill or
+    reversing). reverses: samples move both ways faster than it (the motion reverses inside
+    the block). current_residual_var_a2: variance of the current about
     its straight-line trend in the block (a step inside the block, e.g. the onset of a jam,
     makes it large; the measurement noise uses it). silence_before_s: time from the previous
     block's last accepted sample to this block's first (a hole in the data: dropouts or
@@ -258,6 +264,9 @@ class SampleBlocker:
             LARGEST_POSITION_RAD,
         )
         #: The most samples a block holds (MAX_SAMPLE_RATE_HZ).
+        #: A speed sample inside a block this far off the line of its two neighbours is left
+        #: out of the block's direction and reversal (SampleBlocker._speed_range).
+        self._wild_rad_s = SPIKE_SIGMAS * params.noise.speed_std_rad_s
         self.block_capacity = math.ceil(params.filter.block_duration_s * MAX_SAMPLE_RATE_HZ)
         self.counters = InputCounters()
         #: Samples rejected as out of range since this blocker started, by the field beyond
@@ -568,7 +577,7 @@ class SampleBlocker:
             run.current_a, mean_i, t, mean_t, variance_t, spread, means
         )
         threshold = self._params.filter.standstill_speed_rad_s
-        lowest, highest = np.minimum.reduceat(w, starts), np.maximum.reduceat(w, starts)
+        lowest, highest = self._speed_range(w, starts, last)
         direction = (lowest > threshold).astype(np.int64) - (highest < -threshold).astype(np.int64)
         reverses = (lowest < -threshold) & (highest > threshold)
         speed_var = _variance_about_trend(w, mean_w, t, mean_t, variance_t, spread, means)
@@ -646,6 +655,26 @@ class SampleBlocker:
             self._last_sample_speed = float(w[last[b]])
             self._time_reset = False
         return blocks
+
+    def _speed_range(
+        self, w: FloatArray, starts: IntArray, last: IntArray
+    ) -> tuple[FloatArray, FloatArray]:
+        """Per block (first and last sample ``starts``, ``last``): its lowest and highest
+        speed, leaving out the samples inside it that stand SPIKE_SIGMAS of
+        ``noise.speed_std_rad_s`` off the line their two neighbours agree on, so that one wild
+        sample neither stops nor reverses a moving block (its direction and reversal are
+        taken from them): 150 rad/s off in a stroke at 107 rad/s, under the spike check's
+        bound, a sample made its block a reversal and the load was forgotten. A block's first
+        and last samples always count: where the motion starts or stops they are the ones
+        below the standstill speed, on the line of the others."""
+        inside = np.ones(len(w), dtype=np.bool_)
+        inside[starts] = inside[last] = False
+        wild = inside & off_their_line(
+            np.r_[math.nan, w, math.nan], self._wild_rad_s, self._wild_rad_s, self._wild_rad_s
+        )
+        lowest = np.minimum.reduceat(np.where(wild, np.inf, w), starts)
+        highest = np.maximum.reduceat(np.where(wild, -np.inf, w), starts)
+        return lowest, highest
 
     @staticmethod
     def _end_speeds(

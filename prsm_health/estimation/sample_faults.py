@@ -82,7 +82,7 @@ class SampleFaults:
         spike_a = self._current_spike_a(current, starts, processed)
         x = np.r_[self._previous_current, current, math.nan]
         before, here = x[:-2], x[1:-1]
-        spike_like = _off_their_line(x, spike_a, spike_a, 0.5 * spike_a)
+        spike_like = off_their_line(x, spike_a, spike_a, 0.5 * spike_a)
         # Spike-like samples that are the middle of five in a row are a ripple, not spikes.
         flags = np.r_[self._previous_spike_like, spike_like, False, False]
         spikes = spike_like
@@ -160,10 +160,10 @@ class SampleFaults:
         advancing = steps_s > 0.0
         reach = np.full(len(steps_s), np.inf)
         reach[advancing] = self._max_acceleration * steps_s[advancing] + self._spike_rad_s
-        return _off_their_line(w, reach[:-1], reach[1:], reach[:-1] + reach[1:])
+        return off_their_line(w, reach[:-1], reach[1:], reach[:-1] + reach[1:])
 
 
-def _off_their_line(
+def off_their_line(
     x: FloatArray,
     beyond_before: FloatArray | float,
     beyond_after: FloatArray | float,

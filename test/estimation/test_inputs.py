@@ -488,6 +488,28 @@ def test_standstill_and_reversal_blocks_have_no_direction() -> None:
     assert 0 in directions[12:14]
 
 
+@pytest.mark.parametrize("size", [1, 7, 1000])
+def test_one_wild_speed_sample_inside_a_block_neither_stops_nor_reverses_it(size: int) -> None:
+    """In a stroke at -100 rad/s, a sample at +50 rad/s (the motor could reach it: not a
+    spike) inside a block, or at 0 rad/s: the block still moves at -1 and does not reverse. At
+    a block's first sample the same value does reverse it (only samples inside a block have
+    both neighbours there to tell a wild one): where the motion starts or stops the samples
+    below the standstill speed are at the block's ends, on the line of the others."""
+    samples = run(1.0)
+    speed = np.full(len(samples), -100.0) + np.random.default_rng(2).normal(0.0, 0.2, len(samples))
+    speed[415] = 50.0  # inside the block of samples 400-439
+    speed[615] = 0.0  # inside the block of samples 600-639
+    speed[800] = 50.0  # the first sample of the block of samples 800-839
+    moved = MotorSamples(samples.stamp_s, samples.current_a, speed, samples.position_rad)
+    blocks, blocker = feed_in_chunks(moved, size)
+    assert blocker.counters.rejected_total == 0
+    by_first = {round((b.stamp_s - 0.1 - 0.0195) * 1000): b for b in blocks}
+    assert by_first[400].direction == -1 and not by_first[400].reverses
+    assert by_first[600].direction == -1 and not by_first[600].reverses
+    assert by_first[800].direction == 0 and by_first[800].reverses
+    assert all(b.direction == -1 for first, b in by_first.items() if first not in (800,))
+
+
 def test_samples_closer_than_a_microsecond_carry_no_acceleration() -> None:
     """A speed step between samples 1e-300 s apart is no acceleration of 1e302 rad/s^2."""
     samples = MotorSamples(
