@@ -68,7 +68,7 @@ SHORTEST_SLOPE_SPAN_S = 1e-6
 #: (50 rad/s at 1 kHz: 1,280 rad/s^2, 0.31 N m of inertia torque on the downhole screw), and
 #: a jam explained the step (sudden-jam: a false count of 3, 6.5 % of rated load RMSE).
 END_SAMPLES = 3
-#: The variance of the median of three independent standard normal values (Var of the
+#: The variance of the median of three (END_SAMPLES) independent standard normal values (the
 #: median's density 6 F (1 - F) f, integrated).
 MEDIAN_OF_THREE_VARIANCE = 0.448671
 #: A jumped-back clock is followed only after this many samples on its new time line (and
@@ -263,10 +263,10 @@ class SampleBlocker:
             params.max_motor_speed_rad_s,
             LARGEST_POSITION_RAD,
         )
-        #: The most samples a block holds (MAX_SAMPLE_RATE_HZ).
         #: A speed sample inside a block this far off the line of its two neighbours is left
         #: out of the block's direction and reversal (SampleBlocker._speed_range).
         self._wild_rad_s = SPIKE_SIGMAS * params.noise.speed_std_rad_s
+        #: The most samples a block holds (MAX_SAMPLE_RATE_HZ).
         self.block_capacity = math.ceil(params.filter.block_duration_s * MAX_SAMPLE_RATE_HZ)
         self.counters = InputCounters()
         #: Samples rejected as out of range since this blocker started, by the field beyond
