@@ -37,12 +37,7 @@ from prsm_health.estimation.motion_torque import TorqueAlongMotion
 from prsm_health.estimation.noise_history import MIN_SAMPLES, NoiseHistory
 from prsm_health.estimation.params import EstimatorParams
 from prsm_health.estimation.position_speed import PositionPerSpeed
-from prsm_health.estimation.sample_faults import (
-    SPIKE_SIGMAS,
-    STUCK_RUN_SAMPLES,
-    SampleFaults,
-    off_their_line,
-)
+from prsm_health.estimation.sample_faults import STUCK_RUN_SAMPLES, SampleFaults
 from prsm_health.physics.meshing import carrier_speed_rad_s
 from prsm_health.signals import BoolArray, FloatArray, IntArray, MotorSamples
 
@@ -164,7 +159,7 @@ class Block:
     carrier_cos, carrier_sin: means of cos and sin of the carrier angle (exact averaging of
     the carrier-frequency ripple).
     direction: +1 or -1 when every sample moves that way faster than the standstill speed
-    (but wild ones inside the block: SampleBlocker._speed_range), else 0 (standstill or
+    (but wild ones inside the block: SampleFaults.wild_inside), else 0 (standstill or
     reversing). reverses: samples move both ways faster than it (the motion reverses inside
     the block). current_residual_var_a2: variance of the current about
     its straight-line trend in the block (a step inside the block, e.g. the onset of a jam,
@@ -263,9 +258,6 @@ class SampleBlocker:
             params.max_motor_speed_rad_s,
             LARGEST_POSITION_RAD,
         )
-        #: A speed sample inside a block this far off the line of its two neighbours is left
-        #: out of the block's direction and reversal (SampleBlocker._speed_range).
-        self._wild_rad_s = SPIKE_SIGMAS * params.noise.speed_std_rad_s
         #: The most samples a block holds (MAX_SAMPLE_RATE_HZ).
         self.block_capacity = math.ceil(params.filter.block_duration_s * MAX_SAMPLE_RATE_HZ)
         self.counters = InputCounters()
@@ -660,18 +652,11 @@ class SampleBlocker:
         self, w: FloatArray, starts: IntArray, last: IntArray
     ) -> tuple[FloatArray, FloatArray]:
         """Per block (first and last sample ``starts``, ``last``): its lowest and highest
-        speed, leaving out the samples inside it that stand SPIKE_SIGMAS of
-        ``noise.speed_std_rad_s`` off the line their two neighbours agree on, so that one wild
-        sample neither stops nor reverses a moving block (its direction and reversal are
-        taken from them): 150 rad/s off in a stroke at 107 rad/s, under the spike check's
-        bound, a sample made its block a reversal and the load was forgotten. A block's first
-        and last samples always count: where the motion starts or stops they are the ones
-        below the standstill speed, on the line of the others."""
-        inside = np.ones(len(w), dtype=np.bool_)
-        inside[starts] = inside[last] = False
-        wild = inside & off_their_line(
-            np.r_[math.nan, w, math.nan], self._wild_rad_s, self._wild_rad_s, self._wild_rad_s
-        )
+        speed, leaving out the wild samples inside it (:meth:`SampleFaults.wild_inside`), so
+        that one wild sample neither stops nor reverses a moving block (its direction and
+        reversal are taken from them): 150 rad/s off in a stroke at 107 rad/s, under the
+        spike check's bound, a sample made its block a reversal and the load was forgotten."""
+        wild = self.faults.wild_inside(w, starts, last)
         lowest = np.minimum.reduceat(np.where(wild, np.inf, w), starts)
         highest = np.maximum.reduceat(np.where(wild, -np.inf, w), starts)
         return lowest, highest

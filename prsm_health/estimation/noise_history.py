@@ -98,7 +98,8 @@ class NoiseHistory:
         that follow it)."""
         history, ends = self._extended(block_var, measured)
         before_ends = np.r_[len(history) - np.count_nonzero(measured), ends]
-        before_ends[:-1][(before_ends[:-1] == 0) & measured] = 1
+        own = np.flatnonzero((before_ends[:-1] == 0) & measured)  # the first block measured
+        before_ends[own] = 1
         before = self._at(history, before_ends)
         return before[:-1], float(before[-1])
 

@@ -5,7 +5,9 @@ side, and counts what they reject (SPIKE, STUCK). A current spike is a sample SP
 the current's noise away from both neighbours, which agree; the noise is measured block by
 block (:meth:`SampleFaults._current_spike_a`). A speed spike is a speed the motor cannot
 accelerate to and back in the time between its neighbours (:meth:`SampleFaults._speed_spikes`).
-A stuck current is a run of at least STUCK_RUN_SAMPLES identical values. Their state (the last
+A stuck current is a run of at least STUCK_RUN_SAMPLES identical values. A speed sample
+inside a block that stands far off its neighbours' line but within the motor's reach is kept,
+but marked wild (:meth:`SampleFaults.wild_inside`) for the block's direction. Their state (the last
 sample before the pending ones, the identical run ending there, the current's noise measured
 so far) is carried across chunks, so the result does not depend on how the samples come.
 """
@@ -82,7 +84,7 @@ class SampleFaults:
         spike_a = self._current_spike_a(current, starts, processed)
         x = np.r_[self._previous_current, current, math.nan]
         before, here = x[:-2], x[1:-1]
-        spike_like = off_their_line(x, spike_a, spike_a, 0.5 * spike_a)
+        spike_like = _off_their_line(x, spike_a, spike_a, 0.5 * spike_a)
         # Spike-like samples that are the middle of five in a row are a ripple, not spikes.
         flags = np.r_[self._previous_spike_like, spike_like, False, False]
         spikes = spike_like
@@ -160,10 +162,23 @@ class SampleFaults:
         advancing = steps_s > 0.0
         reach = np.full(len(steps_s), np.inf)
         reach[advancing] = self._max_acceleration * steps_s[advancing] + self._spike_rad_s
-        return off_their_line(w, reach[:-1], reach[1:], reach[:-1] + reach[1:])
+        return _off_their_line(w, reach[:-1], reach[1:], reach[:-1] + reach[1:])
+
+    def wild_inside(self, w: FloatArray, starts: IntArray, last: IntArray) -> BoolArray:
+        """Per speed of ``w`` (the accepted samples of complete blocks, whose first and last
+        samples are ``starts`` and ``last``): a sample inside its block that stands SPIKE_SIGMAS
+        of ``noise.speed_std_rad_s`` off the line its two neighbours agree on. Accepted (the
+        motor could reach it: :meth:`_speed_spikes`), but no evidence of the block's
+        direction (inputs.SampleBlocker._speed_range). A block's first and last samples are
+        never wild: where the motion starts or stops they are the ones below the standstill
+        speed, on the line of the others, and their other neighbour is in another block."""
+        inside = np.ones(len(w), dtype=np.bool_)
+        inside[starts] = inside[last] = False
+        reach = self._spike_rad_s
+        return inside & _off_their_line(np.r_[math.nan, w, math.nan], reach, reach, reach)
 
 
-def off_their_line(
+def _off_their_line(
     x: FloatArray,
     beyond_before: FloatArray | float,
     beyond_after: FloatArray | float,
