@@ -189,6 +189,12 @@ def test_malformed_inputs_are_counted_not_published(ros: None, tmp_path: Path) -
     assert max(len(line) for line in joint_log.splitlines()) < 1000
 
 
+#: How long a burst may take to reach the node [s]. Reliable DDS delivers it at the pace its
+#: repairs allow: 20,000 samples took 30.9-34.2 s on 2026-11-29 (three runs at 086f135; at
+#: 2f1f4e1 three in three missed the 30 s waited until then), every one arriving.
+BURST_WAIT_S = 90.0
+
+
 def input_health_after_burst(tmp_path: Path, name: str, samples: MotorSamples) -> dict[str, Any]:
     """Publish every sample at once (reliable, MotorState) into a node of its own named
     ``name`` (input_qos reliable, the default queue depth); return its input-health status
@@ -222,7 +228,7 @@ def input_health_after_burst(tmp_path: Path, name: str, samples: MotorSamples) -
                 received = status is not None and status["values"]["received"] == str(count)
                 return status if received else None
 
-            listener.wait_for(lambda: said() is not None, 30.0, f"{count} samples received")
+            listener.wait_for(lambda: said() is not None, BURST_WAIT_S, f"{count} samples received")
             assert node.alive(), node.log()
             status = said()
             assert status is not None
@@ -231,7 +237,7 @@ def input_health_after_burst(tmp_path: Path, name: str, samples: MotorSamples) -
         listener.close()
 
 
-@pytest.mark.timeout(90)
+@pytest.mark.timeout(150)
 def test_reliable_input_keeps_every_sample_of_a_burst(ros: None, tmp_path: Path) -> None:
     """20,000 messages published at once into a node with input_qos reliable and the default
     queue depth (1000): every one is received (KEEP_ALL holds the publisher back; with
@@ -242,7 +248,7 @@ def test_reliable_input_keeps_every_sample_of_a_burst(ros: None, tmp_path: Path)
     assert status["values"]["received"] == str(count)
 
 
-@pytest.mark.timeout(90)
+@pytest.mark.timeout(150)
 def test_a_current_of_the_other_sign_is_said_in_input_health(ros: None, tmp_path: Path) -> None:
     """4 s forward and 4 s back with the current's sign the other way round: the motor brakes
     the motion both ways, which no other check sees (it agrees with position and speed).
